@@ -1,0 +1,1 @@
+"""The industrial UGV: its description and its onboard navigation stack (no PyBullet)."""

@@ -1,0 +1,1 @@
+"""Experiments: scenario files, the closed-loop runner, metrics, figures and the CLI."""

@@ -1,0 +1,116 @@
+"""2D rigid-body frames: poses ``(x, y, theta)`` in REP-103 convention.
+
+A pose is a length-3 float array ``(x, y, theta)``: the position of a child frame in its
+parent frame and its heading, counter-clockwise from the parent's x axis, wrapped to
+``(-pi, pi]``. Functions here are pure and take anything array-like.
+
+Examples
+--------
+>>> import numpy as np
+>>> robot = np.array([1.0, 2.0, np.pi / 2])
+>>> transform_points(robot, [[1.0, 0.0]])  # a point 1 m ahead of the robot
+array([[1., 3.]])
+>>> compose(robot, inverse(robot))
+array([0., 0., 0.])
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "between",
+    "compose",
+    "inverse",
+    "transform_points",
+    "untransform_points",
+    "wrap_angle",
+]
+
+
+def wrap_angle(angle: ArrayLike) -> np.ndarray | float:
+    """Wrap angles to ``(-pi, pi]``.
+
+    Examples
+    --------
+    >>> float(wrap_angle(3 * np.pi / 2))
+    -1.5707963267948966
+    >>> float(wrap_angle(-np.pi))
+    3.141592653589793
+    """
+    wrapped = np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), 2.0 * np.pi)
+    return float(wrapped) if wrapped.ndim == 0 else wrapped
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Return ``a ⊕ b``: pose ``b`` (given in frame ``a``) expressed in ``a``'s parent.
+
+    Examples
+    --------
+    >>> compose([1.0, 0.0, np.pi / 2], [1.0, 0.0, 0.0]).round(12)
+    array([1.        , 1.        , 1.57079633])
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array(
+        [a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])]
+    )
+
+
+def inverse(a: ArrayLike) -> np.ndarray:
+    """Return ``⊖a``, the parent frame seen from pose ``a``.
+
+    Examples
+    --------
+    >>> inverse([1.0, 0.0, 0.0])
+    array([-1.,  0.,  0.])
+    """
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], wrap_angle(-a[2])])
+
+
+def between(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Return ``⊖a ⊕ b``: pose ``b`` expressed in frame ``a`` (both given in one parent).
+
+    This is the odometry increment from ``a`` to ``b``.
+
+    Examples
+    --------
+    >>> between([1.0, 1.0, np.pi / 2], [1.0, 2.0, np.pi / 2]).round(12)
+    array([1., 0., 0.])
+    """
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
+    """Map ``(N, 2)`` points from the frame of ``pose`` into its parent frame.
+
+    Examples
+    --------
+    >>> transform_points([0.0, 0.0, np.pi], [[1.0, 0.0], [0.0, 1.0]]).round(12)
+    array([[-1.,  0.],
+           [-0., -1.]])
+    """
+    pose = np.asarray(pose, dtype=float)
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rotation = np.array([[c, -s], [s, c]])
+    return pts @ rotation.T + pose[:2]
+
+
+def untransform_points(pose: ArrayLike, points: ArrayLike) -> np.ndarray:
+    """Map ``(N, 2)`` points from the parent frame into the frame of ``pose``.
+
+    Examples
+    --------
+    >>> untransform_points([1.0, 0.0, np.pi / 2], [[1.0, 1.0]]).round(12)
+    array([[1., 0.]])
+    """
+    pose = np.asarray(pose, dtype=float)
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    rotation = np.array([[c, -s], [s, c]])
+    return (pts - pose[:2]) @ rotation

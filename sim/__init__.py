@@ -1,0 +1,1 @@
+"""Everything that touches PyBullet: client, world builder, UGV body, lasers, ground truth."""

@@ -1,0 +1,31 @@
+"""The layering of DESIGN.md: algorithm packages never import the simulator."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PURE_PACKAGES = ("semistatic", "robots", "worlds")
+FORBIDDEN = {"pybullet", "sim", "scenarios"}
+
+
+def imported_modules(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+@pytest.mark.parametrize("package", PURE_PACKAGES)
+def test_pure_packages_do_not_import_pybullet_or_sim(package):
+    offenders = {
+        str(path.relative_to(ROOT)): sorted(imported_modules(path) & FORBIDDEN)
+        for path in sorted((ROOT / package).rglob("*.py"))
+    }
+    offenders = {name: mods for name, mods in offenders.items() if mods}
+    assert offenders == {}, f"only sim/ and scenarios/ may use PyBullet: {offenders}"

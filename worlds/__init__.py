@@ -1,0 +1,1 @@
+"""Environments as data: walls, reflective posts, semi-static boxes, people, the path."""
