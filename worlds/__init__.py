@@ -1,1 +1,35 @@
-"""Environments as data: walls, reflective posts, semi-static boxes, people, the path."""
+"""Environments as data: walls, reflective posts, semi-static boxes, people, the path.
+
+Examples
+--------
+>>> from worlds import bundled_worlds, load_world
+>>> "pal3" in bundled_worlds()
+True
+>>> load_world("pal3").people[0].enabled
+False
+"""
+
+from worlds.errors import SpecError
+from worlds.load import bundled_worlds, load_world
+from worlds.spec import (
+    BoxSpec,
+    PathSpec,
+    PersonSpec,
+    PostSpec,
+    SegmentSpec,
+    WallSpec,
+    WorldSpec,
+)
+
+__all__ = [
+    "BoxSpec",
+    "PathSpec",
+    "PersonSpec",
+    "PostSpec",
+    "SegmentSpec",
+    "SpecError",
+    "WallSpec",
+    "WorldSpec",
+    "bundled_worlds",
+    "load_world",
+]

@@ -8,11 +8,42 @@ builds these from TOML; ``sim`` builds them into PyBullet bodies; ``robots`` and
 Units are SI, frames REP-103 (x forward, y left, z up, angles CCW in radians).
 Points are ``(x, y)`` tuples in the world frame unless stated otherwise; field polygons
 are in the robot frame (x ahead of the robot's base, y to its left).
+
+Every class validates itself in ``__post_init__`` (so a spec built in Python is checked
+as well as one loaded from a file) and raises :class:`~worlds.errors.SpecError` with the
+offending key relative to the object; the loader re-anchors it in the file. Sequences
+are normalised to tuples of floats, so specs are hashable and immutable.
+
+Examples
+--------
+>>> segment = SegmentSpec(
+...     name="straight", start_knot=0, end_knot=1,
+...     warning=[(0.25, -0.5), (1.4, -0.5), (1.4, 0.5), (0.25, 0.5)],
+...     protective=[(0.25, -0.3), (0.6, -0.3), (0.6, 0.3), (0.25, 0.3)],
+... )
+>>> path = PathSpec(knots=[(0.0, 0.0), (10.0, 0.0)], segments=[segment])
+>>> world = WorldSpec(name="demo", walls=[WallSpec((0.0, -1.2), (10.0, -1.2))],
+...                   posts=[PostSpec(1.0, -1.1)], boxes=[], people=[], path=path)
+>>> world.path.knots
+((0.0, 0.0), (10.0, 0.0))
+>>> PostSpec(0.0, 0.0, radius=-1.0)
+Traceback (most recent call last):
+...
+worlds.errors.SpecError: <memory>: radius: must be > 0.0, got -1.0
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+
+from worlds.errors import MEMORY, SpecError
+from worlds.validation import Range, bounds, did_you_mean
 
 __all__ = [
     "BoxSpec",
@@ -26,37 +57,161 @@ __all__ = [
 
 Point = tuple[float, float]
 
+MIN_KNOT_SPACING = 1e-3
+"""Consecutive path knots closer than this (m) would make the spline degenerate."""
+
+FIELD_INSIDE_TOLERANCE = 1e-9
+"""Slack (m) when checking that the protective field lies inside the warning field."""
+
+POSITIVE = bounds(gt=0.0)
+NON_NEGATIVE = bounds(ge=0.0)
+UNIT_INTERVAL = bounds(ge=0.0, le=1.0)
+
+
+def _check(value: float, name: str, metadata: dict[str, Range]) -> float:
+    """Return ``value`` as a finite float that satisfies ``metadata``'s range."""
+    valid = metadata["range"]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise SpecError(MEMORY, name, f"expected a number, got {value!r}") from None
+    if not math.isfinite(number) or not valid.contains(number):
+        raise SpecError(MEMORY, name, f"must be {valid.describe()}, got {number}")
+    return number
+
+
+def _floats(value: Any, n: int, name: str) -> tuple[float, ...]:
+    """Return ``value`` as a tuple of ``n`` finite floats."""
+    array = np.asarray(value, dtype=float).reshape(-1)
+    if array.size != n or not np.all(np.isfinite(array)):
+        raise SpecError(MEMORY, name, f"expected {n} finite numbers, got {value!r}")
+    return tuple(float(v) for v in array)
+
+
+def _points(value: Any, name: str) -> tuple[Point, ...]:
+    """Return ``value`` as a tuple of finite ``(x, y)`` tuples."""
+    array = np.asarray(value, dtype=float)
+    if array.size == 0:
+        return ()
+    if array.ndim != 2 or array.shape[1] != 2 or not np.all(np.isfinite(array)):
+        raise SpecError(MEMORY, name, f"expected a list of finite [x, y] points, got {value!r}")
+    return tuple((float(x), float(y)) for x, y in array)
+
+
+def _set(obj: object, name: str, value: Any) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _meta(cls: type, name: str) -> dict[str, Range]:
+    """Return the range metadata of dataclass field ``name``."""
+    return cls.__dataclass_fields__[name].metadata  # type: ignore[attr-defined]
+
+
+def _rectangle(center: np.ndarray, yaw: float, length: float, width: float) -> np.ndarray:
+    """Return the 4 corners (counter-clockwise) of a ``length`` x ``width`` rectangle."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    half = np.array([[1, -1], [1, 1], [-1, 1], [-1, -1]], dtype=float) * [length / 2, width / 2]
+    return half @ np.array([[c, s], [-s, c]]) + center
+
 
 @dataclass(frozen=True)
 class WallSpec:
-    """A straight wall from ``start`` to ``end`` (centre line), ``thickness`` wide."""
+    """A straight wall from ``start`` to ``end`` (centre line), ``thickness`` wide.
+
+    Examples
+    --------
+    >>> wall = WallSpec((0.0, 0.0), (4.0, 0.0), thickness=0.2)
+    >>> wall.length
+    4.0
+    >>> wall.corners().round(2).tolist()
+    [[4.0, -0.1], [4.0, 0.1], [0.0, 0.1], [0.0, -0.1]]
+    """
 
     start: Point
     end: Point
-    thickness: float = 0.10
-    height: float = 2.5
-    remission: float = 0.2
+    thickness: float = field(default=0.10, metadata=POSITIVE)
+    height: float = field(default=2.5, metadata=POSITIVE)
+    remission: float = field(default=0.2, metadata=UNIT_INTERVAL)
+
+    def __post_init__(self) -> None:
+        _set(self, "start", _floats(self.start, 2, "start"))
+        _set(self, "end", _floats(self.end, 2, "end"))
+        for name in ("thickness", "height", "remission"):
+            _set(self, name, _check(getattr(self, name), name, _meta(WallSpec, name)))
+        if self.length < MIN_KNOT_SPACING:
+            raise SpecError(MEMORY, "end", f"wall has zero length: end equals start {self.start}")
+
+    @property
+    def length(self) -> float:
+        """Length of the centre line (m)."""
+        return math.dist(self.start, self.end)
+
+    @property
+    def yaw(self) -> float:
+        """Direction of the centre line from ``start`` to ``end`` (rad)."""
+        return math.atan2(self.end[1] - self.start[1], self.end[0] - self.start[0])
+
+    def corners(self) -> np.ndarray:
+        """Return the ``(4, 2)`` footprint corners, counter-clockwise."""
+        center = (np.asarray(self.start) + np.asarray(self.end)) / 2.0
+        return _rectangle(center, self.yaw, self.length, self.thickness)
 
 
 @dataclass(frozen=True)
 class PostSpec:
-    """A reflective landmark post: a vertical cylinder with high remission."""
+    """A reflective landmark post: a vertical cylinder with high remission.
+
+    Examples
+    --------
+    >>> PostSpec(1, 2).xy
+    (1.0, 2.0)
+    """
 
     x: float
     y: float
-    radius: float = 0.04
-    height: float = 2.5
-    remission: float = 0.95
+    radius: float = field(default=0.04, metadata=POSITIVE)
+    height: float = field(default=2.5, metadata=POSITIVE)
+    remission: float = field(default=0.95, metadata=UNIT_INTERVAL)
+
+    def __post_init__(self) -> None:
+        _set(self, "x", _floats(self.x, 1, "x")[0])
+        _set(self, "y", _floats(self.y, 1, "y")[0])
+        for name in ("radius", "height", "remission"):
+            _set(self, name, _check(getattr(self, name), name, _meta(PostSpec, name)))
+
+    @property
+    def xy(self) -> Point:
+        """Centre of the post in the world frame."""
+        return (self.x, self.y)
 
 
 @dataclass(frozen=True)
 class BoxSpec:
-    """A semi-static box: ``size`` (sx, sy, sz) centred at ``pose`` (x, y, yaw) on the floor."""
+    """A semi-static box: ``size`` (sx, sy, sz) centred at ``pose`` (x, y, yaw) on the floor.
+
+    Examples
+    --------
+    >>> box = BoxSpec("a", size=(0.6, 0.4, 0.5), pose=(1.0, 0.0, 0.0))
+    >>> box.corners().round(2).tolist()
+    [[1.3, -0.2], [1.3, 0.2], [0.7, 0.2], [0.7, -0.2]]
+    """
 
     name: str
-    size: tuple[float, float, float]
+    size: tuple[float, float, float] = field(metadata=POSITIVE)
     pose: tuple[float, float, float]
-    remission: float = 0.3
+    remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
+
+    def __post_init__(self) -> None:
+        size = _floats(self.size, 3, "size")
+        if min(size) <= 0.0:
+            raise SpecError(MEMORY, "size", f"every value must be > 0.0, got {list(size)}")
+        _set(self, "size", size)
+        _set(self, "pose", _floats(self.pose, 3, "pose"))
+        _set(self, "remission", _check(self.remission, "remission", _meta(BoxSpec, "remission")))
+
+    def corners(self) -> np.ndarray:
+        """Return the ``(4, 2)`` footprint corners in the world frame, counter-clockwise."""
+        return _rectangle(np.asarray(self.pose[:2]), self.pose[2], self.size[0], self.size[1])
 
 
 @dataclass(frozen=True)
@@ -65,18 +220,57 @@ class PersonSpec:
 
     Starts at ``waypoints[0]`` at ``start_time`` (s, simulated time since the run began,
     or since the lap began when ``per_lap``), walks at ``speed`` (m/s) to the last
-    waypoint and stays there (or loops back to the first when ``loop``).
+    waypoint and stays there (or loops back to the first when ``loop``). A world may
+    carry people that are off (``enabled = false``) for scenarios to switch on with
+    :meth:`WorldSpec.enable_people`.
+
+    Examples
+    --------
+    >>> walker = PersonSpec("walker", waypoints=[(0, -2), (0, 2)], speed=1.0)
+    >>> walker.path_length
+    4.0
     """
 
     name: str
     waypoints: tuple[Point, ...]
-    radius: float = 0.25
-    height: float = 1.75
-    speed: float = 1.0
-    start_time: float = 0.0
+    radius: float = field(default=0.25, metadata=POSITIVE)
+    height: float = field(default=1.75, metadata=POSITIVE)
+    speed: float = field(default=1.0, metadata=POSITIVE)
+    start_time: float = field(default=0.0, metadata=NON_NEGATIVE)
     loop: bool = False
     per_lap: bool = True
-    remission: float = 0.3
+    remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
+    enabled: bool = True
+
+    def __post_init__(self) -> None:
+        waypoints = _points(self.waypoints, "waypoints")
+        if not waypoints:
+            raise SpecError(MEMORY, "waypoints", "needs at least 1 waypoint, got none")
+        _set(self, "waypoints", waypoints)
+        for name in ("radius", "height", "speed", "start_time", "remission"):
+            _set(self, name, _check(getattr(self, name), name, _meta(PersonSpec, name)))
+
+    @property
+    def path_length(self) -> float:
+        """Length of the walk from the first to the last waypoint (m)."""
+        steps = np.diff(np.asarray(self.waypoints), axis=0)
+        return float(np.linalg.norm(steps, axis=1).sum())
+
+
+def _field_polygon(points: tuple[Point, ...], name: str) -> shapely.Polygon:
+    """Return the field as a shapely polygon, or raise if it is empty or not simple."""
+    if len(points) < 3:
+        raise SpecError(
+            MEMORY, name, f"a field polygon needs at least 3 vertices, got {len(points)}"
+        )
+    polygon = shapely.Polygon(points)
+    if shapely.MultiPoint(points).convex_hull.area <= 0.0:
+        raise SpecError(MEMORY, name, "polygon is empty (zero area): its vertices are collinear")
+    if not shapely.LinearRing(points).is_simple:
+        raise SpecError(
+            MEMORY, name, "polygon is not simple (its edges cross); list the vertices in order"
+        )
+    return polygon
 
 
 @dataclass(frozen=True)
@@ -86,30 +280,178 @@ class SegmentSpec:
     ``warning`` and ``protective`` are simple polygons in the robot frame; the protective
     field lies inside the warning field. The segment's local-map frame is anchored at the
     path pose of ``start_knot``.
+
+    Examples
+    --------
+    >>> square = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+    >>> SegmentSpec("s", 0, 1, warning=square, protective=[(0.3, -0.3), (0.9, 0.0), (0.3, 0.3)])
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: <memory>: protective: protective field is not inside the \
+warning field (0.045 m2 of it sticks out); shrink protective or widen warning
     """
 
     name: str
-    start_knot: int
-    end_knot: int
+    start_knot: int = field(metadata=NON_NEGATIVE)
+    end_knot: int = field(metadata=NON_NEGATIVE)
     warning: tuple[Point, ...]
     protective: tuple[Point, ...]
+
+    def __post_init__(self) -> None:
+        for name in ("start_knot", "end_knot"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+                raise SpecError(MEMORY, name, f"must be an integer >= 0, got {value!r}")
+            _set(self, name, int(value))
+        if self.end_knot <= self.start_knot:
+            raise SpecError(
+                MEMORY,
+                "end_knot",
+                f"must be greater than start_knot ({self.start_knot}), got {self.end_knot}",
+            )
+        _set(self, "warning", _points(self.warning, "warning"))
+        _set(self, "protective", _points(self.protective, "protective"))
+        warning = _field_polygon(self.warning, "warning")
+        protective = _field_polygon(self.protective, "protective")
+        outside = protective.difference(warning).area
+        if outside > FIELD_INSIDE_TOLERANCE:
+            raise SpecError(
+                MEMORY,
+                "protective",
+                f"protective field is not inside the warning field ({outside:.3g} m2 of it "
+                "sticks out); shrink protective or widen warning",
+            )
+
+    def warning_polygon(self) -> shapely.Polygon:
+        """Return the warning field as a shapely polygon in the robot frame.
+
+        Examples
+        --------
+        >>> square = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+        >>> round(SegmentSpec("s", 0, 1, square, square).warning_polygon().area, 3)
+        0.18
+        """
+        return shapely.Polygon(self.warning)
+
+    def protective_polygon(self) -> shapely.Polygon:
+        """Return the protective field as a shapely polygon in the robot frame.
+
+        Examples
+        --------
+        >>> square = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+        >>> SegmentSpec("s", 0, 1, square, square).protective_polygon().bounds
+        (0.3, -0.3, 0.6, 0.3)
+        """
+        return shapely.Polygon(self.protective)
 
 
 @dataclass(frozen=True)
 class PathSpec:
     """The fixed path: C2 cubic splines through ``knots``, cut into ``segments``.
 
-    ``speed`` is the nominal forward speed u1r (m/s) the follower tracks.
+    ``speed`` is the nominal forward speed u1r (m/s) the follower tracks. Segments are
+    listed in path order and cover it without gaps: the first starts at knot 0, each
+    starts where the previous ended, the last ends at the last knot.
+
+    Examples
+    --------
+    >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+    >>> segments = [SegmentSpec("a", 0, 1, field, field), SegmentSpec("b", 1, 2, field, field)]
+    >>> PathSpec(knots=[(0, 0), (1, 0), (2, 1)], segments=segments).segment_of_knot(1)
+    1
     """
 
     knots: tuple[Point, ...]
     segments: tuple[SegmentSpec, ...]
-    speed: float = 0.4
+    speed: float = field(default=0.4, metadata=POSITIVE)
+
+    def __post_init__(self) -> None:
+        knots = _points(self.knots, "knots")
+        if len(knots) < 2:
+            raise SpecError(MEMORY, "knots", f"needs at least 2 knots, got {len(knots)}")
+        steps = np.linalg.norm(np.diff(np.asarray(knots), axis=0), axis=1)
+        if np.any(steps < MIN_KNOT_SPACING):
+            index = int(np.argmin(steps)) + 1
+            raise SpecError(
+                MEMORY, f"knots[{index}]", f"repeats the previous knot {knots[index - 1]}"
+            )
+        _set(self, "knots", knots)
+        _set(self, "segments", tuple(self.segments))
+        _set(self, "speed", _check(self.speed, "speed", _meta(PathSpec, "speed")))
+        if not self.segments:
+            raise SpecError(MEMORY, "segments", "needs at least 1 segment, got none")
+        last = len(knots) - 1
+        expected_start = 0
+        names: set[str] = set()
+        for index, segment in enumerate(self.segments):
+            where = f"segments[{index}]"
+            if segment.name in names:
+                raise SpecError(MEMORY, f"{where}.name", f"duplicate segment name {segment.name!r}")
+            names.add(segment.name)
+            for name in ("start_knot", "end_knot"):
+                knot = getattr(segment, name)
+                if knot > last:
+                    raise SpecError(
+                        MEMORY,
+                        f"{where}.{name}",
+                        f"knot index {knot} is out of range: the path has {len(knots)} knots "
+                        f"(indices 0..{last})",
+                    )
+            if segment.start_knot != expected_start:
+                raise SpecError(
+                    MEMORY,
+                    f"{where}.start_knot",
+                    f"must be {expected_start} so segments cover the path without gaps "
+                    f"or overlaps, got {segment.start_knot}",
+                )
+            expected_start = segment.end_knot
+        if expected_start != last:
+            raise SpecError(
+                MEMORY,
+                f"segments[{len(self.segments) - 1}].end_knot",
+                f"the last segment must end at the last knot ({last}), got {expected_start}",
+            )
+
+    def segment_of_knot(self, knot: int) -> int:
+        """Return the index of the segment that starts at or contains ``knot``.
+
+        The last knot belongs to the last segment.
+        """
+        for index, segment in enumerate(self.segments):
+            if segment.start_knot <= knot < segment.end_knot:
+                return index
+        return len(self.segments) - 1
+
+
+def _unique(items: tuple[Any, ...], kind: str) -> None:
+    seen: dict[str, int] = {}
+    for index, item in enumerate(items):
+        if item.name in seen:
+            raise SpecError(
+                MEMORY,
+                f"{kind}[{index}].name",
+                f"duplicate name {item.name!r} (also {kind}[{seen[item.name]}])",
+            )
+        seen[item.name] = index
 
 
 @dataclass(frozen=True)
 class WorldSpec:
-    """A whole environment. ``source`` is the file it was loaded from (for messages)."""
+    """A whole environment. ``source`` is the file it was loaded from (for messages).
+
+    Posts must not overlap each other or a wall; names of boxes and people are unique.
+
+    Examples
+    --------
+    >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+    >>> path = PathSpec([(0, 0), (5, 0)], [SegmentSpec("a", 0, 1, field, field)])
+    >>> WorldSpec("w", walls=[], posts=[PostSpec(1, 1), PostSpec(1.05, 1)], boxes=[],
+    ...           people=[], path=path)
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: <memory>: posts[1]: overlaps posts[0] (centres 0.05 m apart, \
+radii 0.04 + 0.04 m)
+    """
 
     name: str
     walls: tuple[WallSpec, ...]
@@ -117,4 +459,69 @@ class WorldSpec:
     boxes: tuple[BoxSpec, ...]
     people: tuple[PersonSpec, ...]
     path: PathSpec
-    source: str = "<memory>"
+    description: str = ""
+    source: str = MEMORY
+
+    def __post_init__(self) -> None:
+        for name in ("walls", "posts", "boxes", "people"):
+            _set(self, name, tuple(getattr(self, name)))
+        _unique(self.boxes, "boxes")
+        _unique(self.people, "people")
+        centres = np.array([post.xy for post in self.posts], dtype=float).reshape(-1, 2)
+        radii = np.array([post.radius for post in self.posts], dtype=float)
+        for index in range(1, len(self.posts)):
+            gaps = np.linalg.norm(centres[:index] - centres[index], axis=1)
+            clash = np.flatnonzero(gaps < radii[:index] + radii[index])
+            if clash.size:
+                other = int(clash[0])
+                raise SpecError(
+                    MEMORY,
+                    f"posts[{index}]",
+                    f"overlaps posts[{other}] (centres {gaps[other]:.2f} m apart, radii "
+                    f"{radii[other]:g} + {radii[index]:g} m)",
+                )
+        walls = [shapely.Polygon(wall.corners()) for wall in self.walls]
+        for index, post in enumerate(self.posts):
+            disc = shapely.Point(post.xy).buffer(post.radius)
+            for wall_index, wall in enumerate(walls):
+                if disc.intersection(wall).area > 0.0:
+                    raise SpecError(
+                        MEMORY,
+                        f"posts[{index}]",
+                        f"overlaps walls[{wall_index}]; move the post off the wall "
+                        f"(its centre at least thickness/2 + radius from the centre line)",
+                    )
+
+    @property
+    def active_people(self) -> tuple[PersonSpec, ...]:
+        """The people with ``enabled = true`` (the ones a simulation should spawn)."""
+        return tuple(person for person in self.people if person.enabled)
+
+    def enable_people(self, *names: str) -> WorldSpec:
+        """Return a copy of this world with the named people switched on.
+
+        Examples
+        --------
+        >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+        >>> path = PathSpec([(0, 0), (5, 0)], [SegmentSpec("a", 0, 1, field, field)])
+        >>> walker = PersonSpec("walker", [(2, -1), (2, 1)], enabled=False)
+        >>> world = WorldSpec("w", [], [], [], [walker], path)
+        >>> [p.name for p in world.enable_people("walker").active_people]
+        ['walker']
+        >>> world.enable_people("waker")
+        Traceback (most recent call last):
+        ...
+        worlds.errors.SpecError: <memory>: people: no person named 'waker' (did you mean \
+'walker'?)
+        """
+        known = [person.name for person in self.people]
+        for name in names:
+            if name not in known:
+                raise SpecError(
+                    self.source, "people", f"no person named {name!r}{did_you_mean(name, known)}"
+                )
+        people = tuple(
+            dataclasses.replace(person, enabled=True) if person.name in names else person
+            for person in self.people
+        )
+        return dataclasses.replace(self, people=people)

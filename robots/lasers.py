@@ -1,0 +1,198 @@
+"""Laser range finder specifications: the Sick LMS100 and the Sick S300 safety laser.
+
+A ``LaserSpec`` describes a 2D scanner the way its data sheet does: field of view,
+angular resolution, scan rate, valid range interval and error figures. It is pure data
+(no PyBullet); ``sim.laser.RaycastLaser`` turns it into ray casts, and the onboard stack
+uses ``angles()`` and the intensity threshold to find the reflective landmark posts.
+
+Intensities in this project are remission values on a ``[0, 1]`` scale (diffuse
+reflectance of the hit surface as seen by the scanner): walls and boxes read low, the
+retro-reflective landmark posts read high, and ``POST_INTENSITY_THRESHOLD`` separates them.
+
+Examples
+--------
+>>> LMS100.num_beams, S300.num_beams
+(541, 541)
+>>> round(LMS100.angle_min, 4), round(float(LMS100.angles()[-1]), 4)
+(-2.3562, 2.3562)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "LMS100",
+    "POST_INTENSITY_THRESHOLD",
+    "S300",
+    "LaserSpec",
+]
+
+# Remission (intensity) above which a return is taken to come from a retro-reflective
+# landmark post. Posts are specified at 0.95 and every other surface at <= 0.5, so with
+# an intensity noise of a few hundredths this threshold sits many sigmas from both.
+POST_INTENSITY_THRESHOLD = 0.7
+
+# Slack when counting how many whole angular steps fit in the field of view, so that
+# 270 deg / 0.5 deg gives 540 steps despite floating-point rounding.
+_BEAM_COUNT_SLACK = 1e-9
+
+
+@dataclass(frozen=True)
+class LaserSpec:
+    """A planar laser scanner as its data sheet describes it.
+
+    Parameters
+    ----------
+    name
+        Human-readable model name.
+    fov
+        Field of view (aperture angle) in radians, centred on the sensor's x axis.
+    angular_resolution
+        Angle between neighbouring beams, radians.
+    rate_hz
+        Scans per second.
+    range_min, range_max
+        Valid range interval in metres; returns outside it are reported as ``inf``.
+    range_sigma
+        Statistical (random, per-reading) range error, 1-sigma, metres.
+    range_bias_max
+        Systematic range error bound, metres: each laser instance draws one bias
+        uniformly in ``[-range_bias_max, range_bias_max]`` and adds it to every reading.
+    intensity_sigma
+        1-sigma noise added to the remission of the hit surface.
+    dropout_prob
+        Probability that a beam returns nothing (reported as ``inf``).
+
+    Examples
+    --------
+    >>> spec = LaserSpec(name="toy", fov=math.radians(90), angular_resolution=math.radians(45),
+    ...                  rate_hz=10.0, range_min=0.1, range_max=5.0, range_sigma=0.01,
+    ...                  range_bias_max=0.0, intensity_sigma=0.0, dropout_prob=0.0)
+    >>> spec.num_beams
+    3
+    >>> spec.angles().round(4)
+    array([-0.7854,  0.    ,  0.7854])
+    """
+
+    name: str
+    fov: float
+    angular_resolution: float
+    rate_hz: float
+    range_min: float
+    range_max: float
+    range_sigma: float
+    range_bias_max: float
+    intensity_sigma: float
+    dropout_prob: float
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            raise ValueError("LaserSpec: name must be a non-empty string")
+        if not 0.0 < self.fov <= 2.0 * math.pi:
+            raise ValueError(
+                f"LaserSpec {self.name!r}: fov must be in (0, 2*pi] rad, got {self.fov}; "
+                "pass radians (math.radians(270) for a 270 deg scanner)"
+            )
+        if not 0.0 < self.angular_resolution <= self.fov:
+            raise ValueError(
+                f"LaserSpec {self.name!r}: angular_resolution must be in (0, fov], "
+                f"got {self.angular_resolution} rad with fov={self.fov} rad"
+            )
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0.0):
+            raise ValueError(
+                f"LaserSpec {self.name!r}: rate_hz must be a positive number, got {self.rate_hz}"
+            )
+        if not (0.0 <= self.range_min < self.range_max and math.isfinite(self.range_max)):
+            raise ValueError(
+                f"LaserSpec {self.name!r}: need 0 <= range_min < range_max < inf, "
+                f"got range_min={self.range_min}, range_max={self.range_max}"
+            )
+        for field_name in ("range_sigma", "range_bias_max", "intensity_sigma"):
+            value = getattr(self, field_name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(
+                    f"LaserSpec {self.name!r}: {field_name} must be finite and >= 0, got {value}"
+                )
+        if not 0.0 <= self.dropout_prob < 1.0:
+            raise ValueError(
+                f"LaserSpec {self.name!r}: dropout_prob must be in [0, 1), got {self.dropout_prob}"
+            )
+
+    @property
+    def num_beams(self) -> int:
+        """Return the number of beams in one scan (both edges of the field of view included)."""
+        return math.floor(self.fov / self.angular_resolution + _BEAM_COUNT_SLACK) + 1
+
+    @property
+    def angle_min(self) -> float:
+        """Return the angle of the first (rightmost) beam, ``-fov / 2``, in radians."""
+        return -0.5 * self.fov
+
+    @property
+    def period(self) -> float:
+        """Return the time between two scans, ``1 / rate_hz``, in seconds."""
+        return 1.0 / self.rate_hz
+
+    def angles(self) -> np.ndarray:
+        """Return the ``(num_beams,)`` beam angles in the sensor frame, counter-clockwise.
+
+        Examples
+        --------
+        >>> a = LMS100.angles()
+        >>> a.shape, round(float(a[1] - a[0]), 6)
+        ((541,), 0.008727)
+        """
+        return self.angle_min + self.angular_resolution * np.arange(self.num_beams, dtype=float)
+
+
+LMS100 = LaserSpec(
+    name="Sick LMS100",
+    fov=math.radians(270.0),
+    angular_resolution=math.radians(0.5),
+    rate_hz=50.0,
+    range_min=0.5,
+    range_max=20.0,
+    range_sigma=0.012,
+    range_bias_max=0.030,
+    intensity_sigma=0.02,
+    dropout_prob=0.0,
+)
+"""Sick LMS100 (LMS100-10000), the Pioneer 3DX's laser in the paper.
+
+Data sheet (SICK "LMS100/111/120 Laser Measurement Systems", operating instructions,
+technical data): aperture angle 270 deg; angular resolution 0.25 deg / 0.5 deg
+(0.5 deg used, 541 beams); scanning frequency 25 Hz / 50 Hz (50 Hz used, 0.5 deg goes
+with 50 Hz); operating range 0.5 m to 20 m; statistical error (1 sigma) +-12 mm;
+systematic error +-30 mm. The data sheet gives no intensity noise figure: 0.02 on the
+``[0, 1]`` remission scale is our choice, and dropouts are off by default.
+"""
+
+S300 = LaserSpec(
+    name="Sick S300",
+    fov=math.radians(270.0),
+    angular_resolution=math.radians(0.5),
+    rate_hz=12.5,
+    range_min=0.05,
+    range_max=8.0,
+    range_sigma=0.03,
+    range_bias_max=0.0,
+    intensity_sigma=0.02,
+    dropout_prob=0.0,
+)
+"""Sick S300 safety laser scanner, mounted low on the ``lgv`` preset.
+
+Data sheet (SICK "S300 Safety laser scanner", operating instructions, technical data):
+scanning angle 270 deg; angular resolution 0.5 deg (541 measured values per scan);
+scan time 80 ms, hence 12.5 Hz; protective field range up to 2 m (Medium Range) or 3 m
+(Long Range); warning field range up to 8 m, which we take as ``range_max`` because the
+safety fields and the mapper only use returns inside the warning field. The S300 data
+sheet specifies field tolerances rather than a range noise: 0.03 m (1 sigma) is our
+choice, inside the 100 mm general measurement-error supplement the manual asks to add
+to protective fields; no systematic bias, no intensity output on the real device
+(0.02 remission noise is ours so the scan carries comparable intensities), minimum
+range 0.05 m is ours (the scanner has no blind zone specification beyond its housing).
+"""

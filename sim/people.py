@@ -1,0 +1,117 @@
+"""People walking kinematically through the world along their waypoints.
+
+A person is a static cylinder built by ``sim.world_builder.SimWorld`` and teleported
+(``resetBasePositionAndOrientation``) to where its route puts it at time ``t``. The route
+is the polyline ``PersonSpec.waypoints`` walked at ``speed`` from ``start_time``; a
+``loop`` person walks back to the first waypoint and starts again, any other person stays
+at the last waypoint. Before ``start_time`` a person is not in the scene: it is parked
+below the floor, out of every scan plane and out of the robot's reach.
+
+A ``per_lap`` person's clock restarts with every lap (``update(t, lap_start=...)``), so it
+crosses the path at the same point of every lap; other people follow the run's clock.
+
+Examples
+--------
+>>> from worlds.spec import PersonSpec
+>>> ann = PersonSpec("ann", ((0.0, 0.0), (2.0, 0.0), (2.0, 2.0)), speed=1.0, start_time=1.0)
+>>> person_position(ann, 0.5) is None
+True
+>>> [person_position(ann, t).tolist() for t in (1.0, 2.5, 4.0, 10.0)]
+[[0.0, 0.0], [1.5, 0.0], [2.0, 1.0], [2.0, 2.0]]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from worlds.spec import PersonSpec
+
+__all__ = ["PARKED_Z", "People", "person_position"]
+
+PARKED_Z = -50.0
+"""Height (m) of the body frame of a person who is not in the scene (below the floor)."""
+
+
+def _route(person: PersonSpec) -> np.ndarray:
+    points = np.asarray(person.waypoints, dtype=float).reshape(-1, 2)
+    if person.loop and len(points) > 1:
+        points = np.vstack([points, points[:1]])
+    return points
+
+
+def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
+    """Return the ``(x, y)`` of ``person`` at time ``t`` on its clock, ``None`` before it starts.
+
+    ``t`` is run time, or lap time for a ``per_lap`` person (the caller picks the clock).
+
+    Examples
+    --------
+    >>> from worlds.spec import PersonSpec
+    >>> bob = PersonSpec("bob", ((0.0, 0.0), (1.0, 0.0)), speed=0.5, loop=True)
+    >>> [person_position(bob, t).tolist() for t in (1.0, 3.0, 4.5)]
+    [[0.5, 0.0], [0.5, 0.0], [0.25, 0.0]]
+    """
+    if t < person.start_time:
+        return None
+    route = _route(person)
+    steps = np.hypot(*np.diff(route, axis=0).T)
+    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    total = arc[-1]
+    if total <= 0.0:
+        return route[0].copy()
+    walked = person.speed * (t - person.start_time)
+    walked = walked % total if person.loop else min(walked, total)
+    # the segment that contains `walked`; searchsorted keeps zero-length legs harmless
+    leg = int(np.clip(np.searchsorted(arc, walked, side="right") - 1, 0, len(steps) - 1))
+    fraction = 0.0 if steps[leg] == 0.0 else (walked - arc[leg]) / steps[leg]
+    return route[leg] + fraction * (route[leg + 1] - route[leg])
+
+
+class People:
+    """Moves the person bodies of a ``SimWorld`` to their positions at a given time.
+
+    Parameters
+    ----------
+    world
+        The ``sim.world_builder.SimWorld`` whose people to move.
+
+    Examples
+    --------
+    >>> from sim.client import SimClient
+    >>> from sim.world_builder import SimWorld
+    >>> from worlds.spec import PathSpec, PersonSpec, SegmentSpec, WorldSpec
+    >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+    >>> path = PathSpec([(0.0, 0.0), (1.0, 0.0)], [SegmentSpec("a", 0, 1, field, field)])
+    >>> spec = WorldSpec(name="p", walls=(), posts=(), boxes=(),
+    ...                  people=(PersonSpec("ann", ((0.0, 0.0), (4.0, 0.0)), speed=1.0),),
+    ...                  path=path)
+    >>> with SimClient() as sim:
+    ...     people = People(SimWorld(sim, spec))
+    ...     people.update(12.0, lap_start=10.0)["ann"].tolist()
+    [2.0, 0.0]
+    """
+
+    def __init__(self, world) -> None:
+        self.world = world
+        self._bullet = world.sim.bullet
+        self._ids = {person.name: world.person_id(person.name) for person in world.people}
+        self._upright = self._bullet.getQuaternionFromEuler([0.0, 0.0, 0.0])
+
+    def update(self, t: float, lap_start: float = 0.0) -> dict[str, np.ndarray | None]:
+        """Place every person where its route puts it at run time ``t``.
+
+        ``lap_start`` is the run time at which the current lap began (the clock of
+        ``per_lap`` people). Returns ``{name: (x, y) or None}``, ``None`` for people not
+        yet in the scene.
+        """
+        positions: dict[str, np.ndarray | None] = {}
+        for person in self.world.people:
+            clock = t - lap_start if person.per_lap else t
+            xy = person_position(person, clock)
+            positions[person.name] = xy
+            if xy is None:
+                xyz = [float(person.waypoints[0][0]), float(person.waypoints[0][1]), PARKED_Z]
+            else:
+                xyz = [float(xy[0]), float(xy[1]), 0.0]  # body frames sit on the floor
+            self._bullet.resetBasePositionAndOrientation(self._ids[person.name], xyz, self._upright)
+        return positions
