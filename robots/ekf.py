@@ -1,0 +1,634 @@
+"""EKF localizer on reflective landmark posts (paper Sec. 5.1), built on filterpy.
+
+The state is the robot pose ``(x, y, theta)`` in the world frame. Prediction COMPOUNDS
+the odometry increment ``u = (dx, dy, dtheta)`` measured in the robot frame,
+``x' = x ⊕ u`` (a reference-frame transformation, not a velocity model), with the
+Jacobians ``F = ∂(x ⊕ u)/∂x`` and ``J_u = ∂(x ⊕ u)/∂u`` and process noise
+``Q = J_u Σ_u J_uᵀ``. The correction uses point landmarks observed in range and bearing
+by a laser mounted at ``mount = (x, y, yaw)`` in base_link: every observation is matched
+to the map with a per-observation NIS (Mahalanobis) gate that also refuses ambiguous
+matches, then all accepted pairs enter ONE stacked filterpy update with the bearing
+residuals wrapped. filterpy's update is in Joseph form; the covariance is additionally
+symmetrised and, should it ever lose positive definiteness, eigenvalue-floored.
+
+After a long landmark outage (no accepted update for ``outage_timeout`` seconds) or when
+the position sigma has grown beyond ``max_position_sigma``, the filter re-localises from
+scratch: observations are matched to the map by their mutual distances (which do not
+depend on the pose), and the pose is triangulated (ToTal + least squares) from the
+bearings of the matched posts. Every update is recorded (correction ``x_post - x_prior``
+and 1-sigma bounds, as plotted in the paper's Figure 5).
+
+Examples
+--------
+>>> import numpy as np
+>>> from robots.landmarks import LandmarkObservation
+>>> ekf = EKFLocalizer([[4.0, 0.0], [0.0, 4.0]])
+>>> ekf.initialize([0.0, 0.0, 0.0], np.diag([0.01, 0.01, 0.001]), stamp=0.0)
+>>> ekf.predict([1.0, 0.0, 0.0], np.diag([1e-4, 1e-4, 1e-5]))
+>>> seen = LandmarkObservation(3.0, 0.0, np.diag([1e-4, 1e-6]), [0])
+>>> ekf.update([seen], stamp=0.1)
+[(0, 0)]
+>>> ekf.pose.round(3)
+array([1., 0., 0.])
+>>> ekf.history[-1].correction.round(6) + 0.0  # the prediction was right: no correction
+array([0., 0., 0.])
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from numpy.typing import ArrayLike
+
+from robots.landmarks import (
+    CHI2_2DOF_99,
+    LandmarkObservation,
+    mahalanobis_matrix,
+    pairs_inside_gate,
+    range_bearing_model,
+)
+from robots.triangulation import DEFAULT_MIN_RELIABILITY, TriangulationError, triangulate
+
+__all__ = ["EKFLocalizer", "EKFParams", "EKFRecord"]
+
+_TWO_PI = 2.0 * math.pi
+
+# Smallest eigenvalue kept in the state covariance when it has to be repaired (m^2, rad^2):
+# far below any physical uncertainty, far above round-off.
+_MIN_COVARIANCE_EIGENVALUE = 1e-12
+
+# Re-localisation: at most this many observations (the nearest) are used to generate
+# hypotheses; the verification step still uses all of them.
+_MAX_HYPOTHESIS_OBSERVATIONS = 6
+
+# Minimum matched posts for a re-localisation (three object triangulation).
+_MIN_TRIANGULATION_POSTS = 3
+
+
+def _wrap(angle: float) -> float:
+    """Wrap a scalar angle to ``(-pi, pi]`` (scalar fast path of ``frames.wrap_angle``)."""
+    wrapped = math.remainder(angle, _TWO_PI)
+    return math.pi if wrapped == -math.pi else wrapped
+
+
+def _residual(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Subtract stacked ``(range, bearing)`` vectors, wrapping the bearing rows."""
+    difference = measured - predicted
+    difference[1::2] = np.remainder(difference[1::2] + math.pi, _TWO_PI) - math.pi
+    return difference
+
+
+@dataclass(frozen=True)
+class EKFParams:
+    """Settings of the EKF localizer; the defaults suit an LMS100 on a slow UGV.
+
+    Parameters
+    ----------
+    mount
+        Laser pose ``(x, y, yaw)`` in base_link (``LaserMount.pose2d()``).
+    translation_sigma
+        Odometry noise model used when ``predict`` gets no increment covariance:
+        1-sigma translation error (m) per square-root metre travelled, on x and y.
+    rotation_sigma
+        1-sigma heading error (rad) per square-root radian turned.
+    rotation_per_distance_sigma
+        1-sigma heading error (rad) per square-root metre travelled.
+    min_increment_sigma
+        Floor on each increment sigma (m, rad), so that standing still keeps ``Q > 0``.
+    nis_gate
+        Per-observation gate on the normalised innovation squared (chi-square 2 dof).
+    outage_timeout
+        Seconds without an accepted update after which the filter re-localises by
+        triangulation as soon as three posts are matched.
+    max_position_sigma
+        Largest position 1-sigma (m) tolerated before re-localising; also the largest a
+        triangulation may have to be accepted.
+    min_reliability
+        ToTal reliability gate passed to ``triangulate``.
+    relocalization_tolerance
+        Tolerance (m) when matching observed post-to-post distances to the map, and
+        when counting posts that agree with a re-localisation hypothesis.
+    record_history
+        Keep an ``EKFRecord`` of every update (Figure 5 of the paper).
+
+    Examples
+    --------
+    >>> EKFParams().increment_covariance([0.5, 0.0, 0.0]).diagonal().round(6)
+    array([2.0e-04, 2.0e-04, 5.1e-05])
+    >>> EKFParams(outage_timeout=0.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: EKFParams.outage_timeout must be > 0 s (got 0.0)...
+    """
+
+    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    translation_sigma: float = 0.02
+    rotation_sigma: float = 0.02
+    rotation_per_distance_sigma: float = 0.01
+    min_increment_sigma: float = 1e-4
+    nis_gate: float = CHI2_2DOF_99
+    outage_timeout: float = 5.0
+    max_position_sigma: float = 0.5
+    min_reliability: float = DEFAULT_MIN_RELIABILITY
+    relocalization_tolerance: float = 0.1
+    record_history: bool = True
+
+    def __post_init__(self) -> None:
+        mount = tuple(float(v) for v in self.mount)
+        if len(mount) != 3 or not all(math.isfinite(v) for v in mount):
+            raise ValueError(
+                f"EKFParams.mount must be three finite numbers (x, y, yaw), got {self.mount}"
+            )
+        object.__setattr__(self, "mount", mount)
+        for name in ("translation_sigma", "rotation_sigma", "rotation_per_distance_sigma"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"EKFParams.{name} must be finite and >= 0, got {value}")
+        positive = {
+            "min_increment_sigma": "a small odometry noise floor such as 1e-4",
+            "nis_gate": "a chi-square quantile, e.g. 9.21 for 99% with 2 dof",
+            "outage_timeout": "seconds without landmarks before re-localising, e.g. 5",
+            "max_position_sigma": "metres, e.g. 0.5",
+            "relocalization_tolerance": "metres, e.g. 0.1",
+        }
+        for name, hint in positive.items():
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                unit = " s" if name == "outage_timeout" else ""
+                raise ValueError(f"EKFParams.{name} must be > 0{unit} (got {value}): {hint}")
+        if not self.min_reliability >= 0.0:
+            raise ValueError(f"EKFParams.min_reliability must be >= 0, got {self.min_reliability}")
+
+    def increment_covariance(self, increment: ArrayLike) -> np.ndarray:
+        """Return the default ``(3, 3)`` covariance of an odometry increment.
+
+        Variances grow linearly with the distance travelled and the angle turned
+        (a random walk), with a small floor.
+        """
+        dx, dy, dtheta = (float(v) for v in np.asarray(increment, dtype=float)[:3])
+        distance = math.hypot(dx, dy)
+        floor = self.min_increment_sigma**2
+        translation = self.translation_sigma**2 * distance + floor
+        rotation = (
+            self.rotation_sigma**2 * abs(dtheta)
+            + self.rotation_per_distance_sigma**2 * distance
+            + floor
+        )
+        return np.diag([translation, translation, rotation])
+
+
+@dataclass(frozen=True, eq=False)
+class EKFRecord:
+    """One correction of the filter (or a re-initialisation), for plots and metrics.
+
+    Parameters
+    ----------
+    stamp
+        Time of the update, seconds.
+    prior, posterior
+        Pose before and after the correction.
+    correction
+        ``posterior - prior`` with the heading difference wrapped.
+    sigma
+        1-sigma bounds ``sqrt(diag(P_post))``.
+    landmarks
+        Map indices of the landmarks used.
+    nis
+        Normalised innovation squared of each used observation (empty for a
+        re-initialisation).
+    reinitialized
+        True when the pose came from triangulation rather than an EKF update.
+    """
+
+    stamp: float
+    prior: np.ndarray
+    posterior: np.ndarray
+    correction: np.ndarray
+    sigma: np.ndarray
+    landmarks: tuple[int, ...]
+    nis: tuple[float, ...]
+    reinitialized: bool = False
+
+
+class _CompoundingEKF(ExtendedKalmanFilter):
+    """filterpy EKF whose state prediction compounds the odometry increment."""
+
+    def predict_x(self, u: np.ndarray = 0) -> None:
+        x, y, theta = self.x[0, 0], self.x[1, 0], self.x[2, 0]
+        c, s = math.cos(theta), math.sin(theta)
+        self.x = np.array(
+            [[x + c * u[0] - s * u[1]], [y + s * u[0] + c * u[1]], [_wrap(theta + u[2])]]
+        )
+
+
+@dataclass
+class _Hypothesis:
+    """A re-localisation candidate: sensor pose and the observation-landmark pairs."""
+
+    sensor_pose: np.ndarray
+    pairs: list[tuple[int, int]] = field(default_factory=list)
+
+
+class EKFLocalizer:
+    """Track the robot pose from odometry increments and landmark observations.
+
+    Parameters
+    ----------
+    landmarks
+        ``(M, 2)`` map of the landmark posts, world frame.
+    params
+        Filter settings.
+
+    Examples
+    --------
+    >>> ekf = EKFLocalizer([[3.0, 0.0], [0.0, 3.0], [-3.0, 0.0]])
+    >>> ekf.initialized
+    False
+    >>> seen = [
+    ...     LandmarkObservation(3.0, 0.0, np.diag([1e-4, 1e-6]), [0]),
+    ...     LandmarkObservation(3.0, np.pi / 2, np.diag([1e-4, 1e-6]), [1]),
+    ...     LandmarkObservation(3.0, np.pi, np.diag([1e-4, 1e-6]), [2]),
+    ... ]
+    >>> ekf.step([0.0, 0.0, 0.0], None, seen, stamp=0.0)  # initialises by triangulation
+    [(0, 0), (1, 1), (2, 2)]
+    >>> bool(np.abs(ekf.pose).max() < 1e-9), ekf.history[-1].reinitialized
+    (True, True)
+    """
+
+    def __init__(self, landmarks: ArrayLike, params: EKFParams | None = None) -> None:
+        self.params = EKFParams() if params is None else params
+        self.landmarks = np.array(landmarks, dtype=np.float64).reshape(-1, 2)
+        self.landmarks.flags.writeable = False
+        self._landmark_distances = np.linalg.norm(
+            self.landmarks[:, None, :] - self.landmarks[None, :, :], axis=-1
+        )
+        self._mount = np.array(self.params.mount)
+        self._filter = _CompoundingEKF(dim_x=3, dim_z=2)
+        self.initialized = False
+        # Time of the last accepted update; None: start the outage timer at the next one.
+        self.last_update_stamp: float | None = None
+        self.history: list[EKFRecord] = []
+
+    # ------------------------------------------------------------------ state access
+    @property
+    def pose(self) -> np.ndarray:
+        """Return the current pose estimate ``(x, y, theta)`` (a copy)."""
+        return self._filter.x[:, 0].copy()
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Return the current ``(3, 3)`` state covariance (a copy)."""
+        return self._filter.P.copy()
+
+    def position_sigma(self) -> float:
+        """Return the 1-sigma of the position along its most uncertain direction, m."""
+        return _largest_sigma(self._filter.P)
+
+    def initialize(self, pose: ArrayLike, cov: ArrayLike, stamp: float | None = None) -> None:
+        """Set the state and covariance, e.g. from a known start pose.
+
+        ``stamp`` counts as the time of the last accepted update (the outage timer
+        starts there); with ``None`` it starts at the next ``update``.
+        """
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        cov = np.asarray(cov, dtype=float).reshape(3, 3)
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(cov))):
+            raise ValueError("EKFLocalizer.initialize: pose and cov must be finite")
+        self._filter.x = np.array([[pose[0]], [pose[1]], [_wrap(float(pose[2]))]])
+        self._filter.P = self._repair_covariance(cov)
+        self.initialized = True
+        self.last_update_stamp = None if stamp is None else float(stamp)
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, increment: ArrayLike, increment_cov: ArrayLike | None = None) -> None:
+        """Compound an odometry increment ``(dx, dy, dtheta)`` given in the robot frame.
+
+        ``increment_cov`` is its ``(3, 3)`` covariance; ``None`` uses the noise model of
+        ``EKFParams``. Does nothing before the filter is initialised.
+        """
+        if not self.initialized:
+            return
+        u = np.asarray(increment, dtype=float).reshape(3)
+        sigma_u = (
+            self.params.increment_covariance(u)
+            if increment_cov is None
+            else np.asarray(increment_cov, dtype=float)
+        )
+        theta = self._filter.x[2, 0]
+        c, s = math.cos(theta), math.sin(theta)
+        self._filter.F = np.array(
+            [[1.0, 0.0, -s * u[0] - c * u[1]], [0.0, 1.0, c * u[0] - s * u[1]], [0.0, 0.0, 1.0]]
+        )
+        increment_jacobian = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        self._filter.Q = increment_jacobian @ sigma_u @ increment_jacobian.T
+        self._filter.predict(u)
+
+    # ------------------------------------------------------------------ correction
+    def update(
+        self, observations: Sequence[LandmarkObservation], stamp: float
+    ) -> list[tuple[int, int]]:
+        """Correct the pose with landmark observations taken at ``stamp``.
+
+        Re-localises by triangulation instead when the filter is not initialised, the
+        last accepted update is older than ``outage_timeout`` or the position sigma
+        exceeds ``max_position_sigma`` (and enough posts are matched).
+
+        Returns
+        -------
+        list of (int, int)
+            The ``(observation index, landmark index)`` pairs that were used.
+        """
+        stamp = float(stamp)
+        if self.last_update_stamp is None:
+            self.last_update_stamp = stamp
+        lost = (
+            not self.initialized
+            or stamp - self.last_update_stamp > self.params.outage_timeout
+            or self.position_sigma() > self.params.max_position_sigma
+        )
+        if lost and len(observations) >= _MIN_TRIANGULATION_POSTS:
+            pairs = self.relocalize(observations, stamp)
+            if pairs:
+                return pairs
+        if not self.initialized or not observations:
+            return []
+        prior = self._filter.x[:, 0].copy()
+        predicted, jacobians = range_bearing_model(prior, self.landmarks, self._mount)
+        nis = mahalanobis_matrix(observations, predicted, jacobians, self._filter.P)
+        pairs = pairs_inside_gate(nis, self.params.nis_gate)
+        if not pairs:
+            return []
+        obs_index = [k for k, _ in pairs]
+        landmark_index = [m for _, m in pairs]
+        measured = np.array(
+            [(observations[k].range, observations[k].bearing) for k in obs_index]
+        ).reshape(-1, 1)
+        expected = predicted[landmark_index].reshape(-1, 1)
+        jacobian = jacobians[landmark_index].reshape(-1, 3)
+        noise = np.zeros((2 * len(pairs), 2 * len(pairs)))
+        for row, k in enumerate(obs_index):
+            noise[2 * row : 2 * row + 2, 2 * row : 2 * row + 2] = observations[k].covariance
+        self._filter.update(
+            measured,
+            lambda _x: jacobian,
+            lambda _x: expected,
+            R=noise,
+            residual=_residual,
+        )
+        self._filter.x[2, 0] = _wrap(self._filter.x[2, 0])
+        self._filter.P = self._repair_covariance(self._filter.P)
+        self.last_update_stamp = stamp
+        if self.params.record_history:
+            self._record(stamp, prior, landmark_index, [nis[k, m] for k, m in pairs], False)
+        return pairs
+
+    def step(
+        self,
+        increment: ArrayLike,
+        increment_cov: ArrayLike | None,
+        observations: Sequence[LandmarkObservation],
+        stamp: float,
+    ) -> list[tuple[int, int]]:
+        """Predict with an odometry increment, then update with the observations.
+
+        Returns the ``(observation, landmark)`` pairs used, as ``update`` does.
+        """
+        self.predict(increment, increment_cov)
+        return self.update(observations, stamp)
+
+    # ------------------------------------------------------------------ re-localisation
+    def relocalize(
+        self, observations: Sequence[LandmarkObservation], stamp: float
+    ) -> list[tuple[int, int]]:
+        """Re-initialise the pose by triangulation, ignoring the current estimate's gate.
+
+        Observations are matched to the map by their post-to-post distances (pose
+        invariant) and a verification of every hypothesis against all observations; the
+        best hypothesis is triangulated from its bearings. When hypotheses tie (a
+        symmetric layout), the one nearest the current estimate wins.
+
+        Returns
+        -------
+        list of (int, int)
+            The pairs used, or ``[]`` when no unambiguous, reliable fix was found (the
+            state is then left untouched).
+        """
+        hypothesis = self._best_hypothesis(observations)
+        if hypothesis is None or len(hypothesis.pairs) < _MIN_TRIANGULATION_POSTS:
+            return []
+        obs_index = [k for k, _ in hypothesis.pairs]
+        landmark_index = [m for _, m in hypothesis.pairs]
+        bearings = [observations[k].bearing for k in obs_index]
+        sigmas = [math.sqrt(observations[k].covariance[1, 1]) for k in obs_index]
+        try:
+            sensor_pose, sensor_cov = triangulate(
+                bearings,
+                self.landmarks[landmark_index],
+                sigmas,
+                min_reliability=self.params.min_reliability,
+            )
+        except TriangulationError:
+            return []
+        pose, cov = self._robot_from_sensor(sensor_pose, sensor_cov)
+        if _largest_sigma(cov) > self.params.max_position_sigma:
+            return []
+        prior = self.pose if self.initialized else pose
+        self.initialize(pose, cov, stamp=stamp)
+        if self.params.record_history:
+            self._record(stamp, prior, landmark_index, [], True)
+        return list(hypothesis.pairs)
+
+    def _robot_from_sensor(
+        self, sensor_pose: np.ndarray, sensor_cov: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Return the robot pose ``sensor ⊕ mount⁻¹`` and its propagated covariance."""
+        mount_x, mount_y, mount_yaw = self._mount
+        cm, sm = math.cos(mount_yaw), math.sin(mount_yaw)
+        # The base seen from the sensor: the inverse of the mount.
+        bx, by = -cm * mount_x - sm * mount_y, sm * mount_x - cm * mount_y
+        theta = sensor_pose[2]
+        c, s = math.cos(theta), math.sin(theta)
+        pose = np.array(
+            [
+                sensor_pose[0] + c * bx - s * by,
+                sensor_pose[1] + s * bx + c * by,
+                _wrap(theta - mount_yaw),
+            ]
+        )
+        jacobian = np.array(
+            [[1.0, 0.0, -s * bx - c * by], [0.0, 1.0, c * bx - s * by], [0.0, 0.0, 1.0]]
+        )
+        return pose, self._repair_covariance(jacobian @ sensor_cov @ jacobian.T)
+
+    def _best_hypothesis(self, observations: Sequence[LandmarkObservation]) -> _Hypothesis | None:
+        """Match observations to landmarks by geometry alone; return the best match."""
+        if len(observations) < _MIN_TRIANGULATION_POSTS or self.landmarks.shape[0] < 3:
+            return None
+        points = np.array([obs.point() for obs in observations])
+        tolerance = self.params.relocalization_tolerance
+        nearest = np.argsort([obs.range for obs in observations])[:_MAX_HYPOTHESIS_OBSERVATIONS]
+        hypotheses: list[_Hypothesis] = []
+        seen: set[tuple[int, ...]] = set()
+        for triple in itertools.combinations(sorted(nearest.tolist()), 3):
+            for landmark_triple in self._landmark_triples(points[list(triple)], tolerance):
+                sensor_pose = _rigid_transform(
+                    points[list(triple)], self.landmarks[list(landmark_triple)]
+                )
+                pairs = self._inliers(points, sensor_pose, tolerance)
+                key = tuple(m for _, m in pairs)
+                if len(pairs) >= _MIN_TRIANGULATION_POSTS and key not in seen:
+                    seen.add(key)
+                    hypotheses.append(_Hypothesis(sensor_pose, pairs))
+        if not hypotheses:
+            return None
+        most = max(len(h.pairs) for h in hypotheses)
+        best = [h for h in hypotheses if len(h.pairs) == most]
+        if len(best) > 1 and self.initialized:
+            robot = self.pose[:2]
+            best.sort(key=lambda h: float(np.linalg.norm(h.sensor_pose[:2] - robot)))
+        elif len(best) > 1:
+            return None
+        return best[0]
+
+    def _landmark_triples(self, points: np.ndarray, tolerance: float) -> list[tuple[int, ...]]:
+        """Return landmark triples congruent (same orientation) to three observed points."""
+        d01 = float(np.linalg.norm(points[1] - points[0]))
+        d02 = float(np.linalg.norm(points[2] - points[0]))
+        d12 = float(np.linalg.norm(points[2] - points[1]))
+        distances = self._landmark_distances
+        first_pairs = np.argwhere(np.abs(distances - d01) < tolerance)
+        observed_turn = _cross(points[1] - points[0], points[2] - points[0])
+        triples = []
+        for a, b in first_pairs:
+            if a == b:
+                continue
+            candidates = np.flatnonzero(
+                (np.abs(distances[a] - d02) < tolerance) & (np.abs(distances[b] - d12) < tolerance)
+            )
+            for c in candidates:
+                if c in (a, b):
+                    continue
+                turn = _cross(
+                    self.landmarks[b] - self.landmarks[a], self.landmarks[c] - self.landmarks[a]
+                )
+                if turn * observed_turn > 0.0:
+                    triples.append((int(a), int(b), int(c)))
+        return triples
+
+    def _inliers(
+        self, points: np.ndarray, sensor_pose: np.ndarray, tolerance: float
+    ) -> list[tuple[int, int]]:
+        """Return the unambiguous observation-landmark pairs closer than ``tolerance``."""
+        c, s = math.cos(sensor_pose[2]), math.sin(sensor_pose[2])
+        world = points @ np.array([[c, s], [-s, c]]) + sensor_pose[:2]
+        gaps = np.linalg.norm(world[:, None, :] - self.landmarks[None, :, :], axis=-1)
+        return pairs_inside_gate(gaps, tolerance)
+
+    # ------------------------------------------------------------------ bookkeeping
+    @staticmethod
+    def _repair_covariance(cov: np.ndarray) -> np.ndarray:
+        """Return ``cov`` symmetrised, eigenvalue-floored if it is not positive definite."""
+        cov = 0.5 * (cov + cov.T)
+        if not _positive_definite(cov):
+            values, vectors = np.linalg.eigh(cov)
+            values = np.maximum(values, _MIN_COVARIANCE_EIGENVALUE)
+            cov = (vectors * values) @ vectors.T
+            cov = 0.5 * (cov + cov.T)
+        return cov
+
+    def _record(
+        self,
+        stamp: float,
+        prior: np.ndarray,
+        landmarks: list[int],
+        nis: list[float],
+        reinitialized: bool,
+    ) -> None:
+        """Append the correction just applied to ``history``."""
+        posterior = self._filter.x[:, 0].copy()
+        correction = posterior - prior
+        correction[2] = _wrap(correction[2])
+        self.history.append(
+            EKFRecord(
+                stamp=stamp,
+                prior=prior,
+                posterior=posterior,
+                correction=correction,
+                sigma=np.sqrt(np.diag(self._filter.P)),
+                landmarks=tuple(landmarks),
+                nis=tuple(float(v) for v in nis),
+                reinitialized=reinitialized,
+            )
+        )
+
+    def history_arrays(self) -> dict[str, np.ndarray]:
+        """Return the update history as arrays: stamp, correction, sigma, reinitialized.
+
+        ``correction`` and ``sigma`` are ``(N, 3)``: exactly what the paper's Figure 5
+        plots (corrections of x, y, theta inside their sigma bounds).
+
+        Examples
+        --------
+        >>> EKFLocalizer([[1.0, 0.0]]).history_arrays()["correction"].shape
+        (0, 3)
+        """
+        records = self.history
+        return {
+            "stamp": np.array([r.stamp for r in records], dtype=float),
+            "correction": np.array([r.correction for r in records], dtype=float).reshape(-1, 3),
+            "sigma": np.array([r.sigma for r in records], dtype=float).reshape(-1, 3),
+            "reinitialized": np.array([r.reinitialized for r in records], dtype=bool),
+        }
+
+
+def _largest_sigma(cov: np.ndarray) -> float:
+    """Return the 1-sigma of the position block of ``cov`` along its worst direction."""
+    a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    largest = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+    return math.sqrt(max(largest, 0.0))
+
+
+def _positive_definite(cov: np.ndarray) -> bool:
+    """Return whether a symmetric 3x3 matrix is positive definite (Sylvester's criterion).
+
+    Closed form rather than a Cholesky call: this runs after every update.
+    """
+    (a, b, c), (_, d, e), (_, _, f) = cov.tolist()
+    minor2 = a * d - b * b
+    determinant = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c)
+    return a > 0.0 and minor2 > 0.0 and determinant > 0.0
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> float:
+    """Return the z component of the cross product of two 2D vectors."""
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _rigid_transform(local: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """Return the pose mapping ``local`` points onto ``world`` points (least squares).
+
+    Examples
+    --------
+    >>> local = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    >>> _rigid_transform(local, local + [2.0, 0.0]).round(9)
+    array([2., 0., 0.])
+    """
+    local_mean = local.mean(axis=0)
+    world_mean = world.mean(axis=0)
+    a = local - local_mean
+    b = world - world_mean
+    # 2D Kabsch: the rotation angle that best aligns the centred point sets.
+    theta = math.atan2(
+        float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])),
+        float(np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])),
+    )
+    c, s = math.cos(theta), math.sin(theta)
+    translation = world_mean - np.array(
+        [c * local_mean[0] - s * local_mean[1], s * local_mean[0] + c * local_mean[1]]
+    )
+    return np.array([translation[0], translation[1], theta])

@@ -1,0 +1,517 @@
+"""Reflective landmark posts: detection in a laser scan and association with the map.
+
+The localization laser reads a high remission on the retro-reflective posts (paper
+Sec. 5.1). ``detect_landmarks`` groups consecutive bright beams, checks that each group
+has the angular and radial extent of a post of known radius and estimates the post's
+CENTRE as a range-bearing observation in the sensor frame, with its 2x2 covariance.
+``range_bearing_model`` is the point-landmark sensor model (with the laser mount offset)
+that both ``associate_landmarks`` and the EKF use; ``associate_landmarks`` matches
+observations to map landmarks with a Mahalanobis gate and refuses ambiguous matches.
+
+Examples
+--------
+>>> import numpy as np
+>>> from semistatic.types import Scan
+>>> angles = np.radians(np.arange(-10.0, 10.5, 0.5))
+>>> ranges = np.full(angles.size, 12.0)
+>>> intensities = np.full(angles.size, 0.2)
+>>> ranges[20], intensities[20] = 7.96, 0.95  # one beam hits a post 8 m ahead
+>>> scan = Scan(ranges=ranges, angle_min=angles[0], angle_increment=angles[1] - angles[0],
+...             intensities=intensities)
+>>> [obs] = detect_landmarks(scan)
+>>> round(obs.range, 3), round(obs.bearing, 3), obs.beam_indices.tolist()
+(8.0, 0.0, [20])
+>>> associate_landmarks([obs], [[8.0, 0.0], [0.0, 8.0]], (0.0, 0.0, 0.0), np.eye(3) * 1e-4)
+[(0, 0)]
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from robots.lasers import POST_INTENSITY_THRESHOLD
+from semistatic.frames import wrap_angle
+from semistatic.types import Scan
+
+__all__ = [
+    "CHI2_2DOF_99",
+    "LandmarkObservation",
+    "associate_landmarks",
+    "detect_landmarks",
+    "mahalanobis_matrix",
+    "pairs_inside_gate",
+    "range_bearing_model",
+]
+
+# 99% quantile of the chi-square distribution with 2 degrees of freedom
+# (scipy.stats.chi2.ppf(0.99, 2)): the default Mahalanobis gate of a range-bearing pair.
+CHI2_2DOF_99 = 9.210340371976182
+
+# Default post geometry and sensor noise: the posts of ``worlds.spec.PostSpec`` (4 cm
+# radius) seen by a Sick LMS100 (12 mm range noise, angular jitter far below a beam step).
+DEFAULT_POST_RADIUS = 0.04
+DEFAULT_RANGE_SIGMA = 0.012
+DEFAULT_BEARING_SIGMA = 1e-3
+
+# Centre estimation alternates bearing and range estimates; the second round uses the
+# refined range in the angular half-width, which depends only weakly on it.
+_CENTRE_ITERATIONS = 2
+
+# Slack (in beam steps) on the angular extent a post may cover: the discretisation adds up
+# to one step beyond the true angular width 2 * asin(radius / range).
+_WIDTH_SLACK_STEPS = 1.0
+
+# Candidate centre bearings evaluated across the feasible interval (a grid finer than a
+# tenth of a millimetre at the post's surface for intervals of up to a beam step).
+_BEARING_CANDIDATES = 41
+
+# Range sigma used for the bearing likelihood when the caller claims noise-free ranges.
+_RANGE_SIGMA_FLOOR = 1e-4
+
+# When weighting, a grazing beam's depth into the post is floored at this fraction of the
+# radius: its slopes stay finite (its weight small), its own estimate is unchanged.
+_GRAZING_DEPTH = 0.05
+
+# Floor on a single beam's centre-range variance (m^2) so weights stay finite.
+_MIN_RANGE_VARIANCE = 1e-10
+
+# A post of angular width 2w covers at least floor(2w / step) beams; this many of them
+# may be lost (intensity noise at the silhouette) before a group is too narrow.
+_MISSING_BEAMS_ALLOWED = 1
+
+# A neighbouring beam shorter than the post's nearest return by this many range sigmas
+# hit something in front of the post: the post is partly occluded.
+_OCCLUDER_SIGMAS = 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class LandmarkObservation:
+    """The centre of one landmark post as seen from the laser (sensor frame).
+
+    Parameters
+    ----------
+    range
+        Distance from the laser origin to the post's centre, metres.
+    bearing
+        Direction of the centre, radians counter-clockwise from the laser's x axis.
+    covariance
+        ``(2, 2)`` covariance of ``(range, bearing)``.
+    beam_indices
+        Indices of the scan beams that hit the post.
+
+    Examples
+    --------
+    >>> obs = LandmarkObservation(2.0, np.pi / 2, np.diag([1e-4, 1e-6]), [7, 8])
+    >>> obs.point().round(6)
+    array([0., 2.])
+    """
+
+    range: float
+    bearing: float
+    covariance: np.ndarray
+    beam_indices: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "range", float(self.range))
+        object.__setattr__(self, "bearing", float(wrap_angle(self.bearing)))
+        covariance = np.array(self.covariance, dtype=np.float64)
+        if covariance.shape != (2, 2):
+            raise ValueError(
+                f"LandmarkObservation.covariance must be 2x2 (range, bearing), "
+                f"got shape {covariance.shape}"
+            )
+        covariance.flags.writeable = False
+        object.__setattr__(self, "covariance", covariance)
+        indices = np.array(self.beam_indices, dtype=np.int64).reshape(-1)
+        indices.flags.writeable = False
+        object.__setattr__(self, "beam_indices", indices)
+        if not (math.isfinite(self.range) and self.range > 0.0):
+            raise ValueError(f"LandmarkObservation.range must be > 0, got {self.range}")
+
+    def point(self) -> np.ndarray:
+        """Return the centre as ``(x, y)`` in the sensor frame."""
+        return np.array([self.range * math.cos(self.bearing), self.range * math.sin(self.bearing)])
+
+
+def detect_landmarks(
+    scan: Scan,
+    *,
+    intensity_threshold: float = POST_INTENSITY_THRESHOLD,
+    post_radius: float = DEFAULT_POST_RADIUS,
+    range_sigma: float = DEFAULT_RANGE_SIGMA,
+    bearing_sigma: float = DEFAULT_BEARING_SIGMA,
+    min_beams: int = 1,
+) -> list[LandmarkObservation]:
+    """Find the reflective posts in a scan and estimate their centres.
+
+    Consecutive valid beams with ``intensity >= intensity_threshold`` form a group; a
+    group is split where the range jumps by more than a post's diameter (two posts
+    overlapping in angle). A group is a post only if its angular extent fits a cylinder
+    of ``post_radius`` at that range (at most one beam step wider: a reflective strip
+    is not a post; at most one beam narrower: a glint is not a post) and its range
+    spread fits the radius. Groups touching the edge of the field of view, or next to a
+    beam that hit something in front of them (partly occluded), are skipped: the
+    visible part's middle is not the centre.
+
+    The centre bearing is constrained to the interval of directions compatible with the
+    beams that hit (within the post's half-width of the centre) and the neighbouring
+    beams that missed it; within it, its posterior mean under the range likelihood of
+    the circle (uniform prior) is taken. With noisy ranges that is near the interval's
+    middle, with precise ranges it locks onto the true centre: either way tighter than
+    the mean beam angle. The centre range is an inverse-variance weighted mean, over the
+    hits, of ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))`` (not ``min range + R``,
+    biased long at grazing beams). The covariance propagates the range noise, the
+    bearing posterior and ``bearing_sigma`` to first order.
+
+    Parameters
+    ----------
+    scan
+        A scan with ``intensities``.
+    intensity_threshold
+        Remission from which a return counts as reflective.
+    post_radius
+        Radius of the landmark posts, metres.
+    range_sigma
+        1-sigma range noise of one beam, metres.
+    bearing_sigma
+        1-sigma angular noise of the beam directions, radians.
+    min_beams
+        Groups with fewer bright beams are ignored.
+
+    Returns
+    -------
+    list of LandmarkObservation
+        In scan order.
+
+    Examples
+    --------
+    >>> angles = np.radians(np.arange(-5.0, 5.5, 0.5))
+    >>> ranges = np.full(angles.size, 4.0)
+    >>> ranges[8:11] = [1.97, 1.96, 1.97]  # a post 2 m away, half a degree to the right
+    >>> intensities = np.where(ranges < 3.0, 0.95, 0.1)
+    >>> scan = Scan(ranges=ranges, angle_min=angles[0], angle_increment=angles[1] - angles[0],
+    ...             intensities=intensities)
+    >>> [obs] = detect_landmarks(scan, range_sigma=0.0)
+    >>> round(obs.range, 2), round(float(np.degrees(obs.bearing)), 2)
+    (2.0, -0.5)
+    """
+    if scan.intensities is None:
+        raise ValueError(
+            "detect_landmarks: the scan has no intensities; posts are found by their "
+            "remission, so build the Scan with intensities=..."
+        )
+    if not post_radius > 0.0:
+        raise ValueError(f"detect_landmarks: post_radius must be > 0 m, got {post_radius}")
+    if range_sigma < 0.0 or bearing_sigma < 0.0:
+        raise ValueError(
+            "detect_landmarks: range_sigma and bearing_sigma must be >= 0, "
+            f"got {range_sigma}, {bearing_sigma}"
+        )
+    ranges = scan.ranges
+    angles = scan.angles()
+    valid = scan.valid_mask()
+    bright = valid & (scan.intensities >= intensity_threshold)
+    indices = np.flatnonzero(bright)
+    if indices.size == 0:
+        return []
+    max_jump = 2.0 * post_radius + 3.0 * range_sigma
+    breaks = (np.diff(indices) > 1) | (np.abs(np.diff(ranges[indices])) > max_jump)
+    groups = np.split(indices, np.flatnonzero(breaks) + 1)
+    observations = []
+    for group in groups:
+        if group.size < min_beams:
+            continue
+        observation = _post_from_group(
+            group,
+            ranges,
+            angles,
+            valid,
+            scan.angle_increment,
+            post_radius,
+            range_sigma,
+            bearing_sigma,
+        )
+        if observation is not None:
+            observations.append(observation)
+    return observations
+
+
+def _post_from_group(
+    group: np.ndarray,
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    valid: np.ndarray,
+    increment: float,
+    radius: float,
+    range_sigma: float,
+    bearing_sigma: float,
+) -> LandmarkObservation | None:
+    """Return the post observation of one group of bright beams, or None if not a post."""
+    hit_ranges = ranges[group]
+    hit_angles = angles[group]
+    first, last = int(group[0]), int(group[-1])
+    if first == 0 or last == ranges.size - 1:
+        return None  # cut by the edge of the field of view: its centre is unknowable
+    near = float(hit_ranges.min())
+    if hit_ranges.max() - near > radius + 3.0 * range_sigma:
+        return None
+    distance = near + radius
+    half_width = math.asin(min(1.0, radius / distance))
+    if hit_angles[-1] - hit_angles[0] > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
+        return None  # too wide for a post: a reflective strip, a shiny wall
+    if group.size < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
+        return None  # too narrow: a post this close covers more beams (a speck, a glint)
+    # A neighbour beam in front of the post hides part of it: the visible part's middle
+    # is not the centre, and no honest small covariance exists, so the post is skipped.
+    occluder_limit = near - _OCCLUDER_SIGMAS * range_sigma
+    for neighbour in (first - 1, last + 1):
+        if valid[neighbour] and ranges[neighbour] < occluder_limit:
+            return None
+    for _ in range(_CENTRE_ITERATIONS):
+        half_width = math.asin(min(1.0, radius / distance))
+        low, high = hit_angles[-1] - half_width, hit_angles[0] + half_width
+        # The neighbouring beams missed the post: its silhouette ends before them.
+        low = max(low, angles[first - 1] + half_width)
+        high = min(high, angles[last + 1] - half_width)
+        if low > high:  # noise made the bounds cross: fall back to the hits alone
+            low, high = sorted((hit_angles[-1] - half_width, hit_angles[0] + half_width))
+        bearing, bearing_variance = _centre_bearing(
+            hit_ranges, hit_angles, low, high, radius, max(range_sigma, _RANGE_SIGMA_FLOOR)
+        )
+        bearing_variance += bearing_sigma**2
+        distance, range_variance, cross = _centre_range(
+            hit_ranges, hit_angles - bearing, radius, range_sigma, bearing_variance
+        )
+    covariance = np.array([[range_variance, cross], [cross, bearing_variance]])
+    return LandmarkObservation(distance, bearing, covariance, group)
+
+
+def _centre_bearing(
+    hit_ranges: np.ndarray,
+    hit_angles: np.ndarray,
+    low: float,
+    high: float,
+    radius: float,
+    range_sigma: float,
+) -> tuple[float, float]:
+    """Return the posterior mean and variance of the centre bearing on ``[low, high]``.
+
+    The prior is uniform on the interval allowed by the hits and misses; the likelihood
+    of a candidate bearing compares the measured ranges with those of the circle
+    (centre distance profiled by least squares). With noisy ranges this stays near the
+    middle of the interval; with precise ranges it locks onto the true centre.
+    """
+    if not high > low:
+        return 0.5 * (low + high), 0.0
+    candidates = np.linspace(low, high, _BEARING_CANDIDATES)
+    offsets = hit_angles[None, :] - candidates[:, None]
+    sine, cosine = np.sin(offsets), np.cos(offsets)
+    chord_sq = np.maximum(radius**2 - (hit_ranges * sine) ** 2, 0.0)
+    # Centre distance for each candidate: the mean of the beams' individual estimates.
+    distance = (hit_ranges * cosine + np.sqrt(chord_sq)).mean(axis=1, keepdims=True)
+    expected = distance * cosine - np.sqrt(np.maximum(radius**2 - (distance * sine) ** 2, 0.0))
+    misfit = ((hit_ranges - expected) ** 2).sum(axis=1) / range_sigma**2
+    weights = np.exp(-0.5 * (misfit - misfit.min()))
+    weights /= weights.sum()
+    mean = float(weights @ candidates)
+    return mean, float(weights @ (candidates - mean) ** 2)
+
+
+def _centre_range(
+    hit_ranges: np.ndarray,
+    offsets: np.ndarray,
+    radius: float,
+    range_sigma: float,
+    bearing_variance: float,
+) -> tuple[float, float, float]:
+    """Return the centre distance, its variance and its covariance with the bearing.
+
+    Each beam at angular offset ``delta`` from the centre direction, hitting at range
+    ``r``, puts the centre at ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near
+    the post's silhouette are very sensitive to the range noise and to the bearing
+    error (the square root's slope diverges there), so the beams are averaged with
+    inverse-variance weights from first-order propagation of both.
+    """
+    sine, cosine = np.sin(offsets), np.cos(offsets)
+    across_sq = (hit_ranges * sine) ** 2
+    # Keep the square root away from 0, where the slopes diverge (grazing beams).
+    along = hit_ranges * cosine + np.sqrt(np.maximum(radius**2 - across_sq, 0.0))
+    depth = np.sqrt(np.maximum(radius**2 - across_sq, (_GRAZING_DEPTH * radius) ** 2))
+    slope_range = cosine - hit_ranges * sine**2 / depth
+    slope_bearing = hit_ranges * sine + hit_ranges**2 * sine * cosine / depth
+    variance = range_sigma**2 * slope_range**2 + bearing_variance * slope_bearing**2
+    weights = 1.0 / np.maximum(variance, _MIN_RANGE_VARIANCE)
+    weights /= weights.sum()
+    # The range noise is independent per beam; the bearing error is shared by all beams,
+    # so it enters coherently and also correlates the range with the bearing estimate.
+    coupling = float(weights @ slope_bearing)
+    range_variance = float(weights**2 @ slope_range**2) * range_sigma**2
+    range_variance += coupling**2 * bearing_variance
+    return float(weights @ along), range_variance, coupling * bearing_variance
+
+
+def range_bearing_model(
+    pose: ArrayLike, landmarks: ArrayLike, mount: ArrayLike = (0.0, 0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predict range and bearing of point landmarks from a robot pose, with Jacobians.
+
+    The laser sits at ``mount = (x, y, yaw)`` in the robot frame (base_link), so the
+    measurement is taken from the sensor pose ``pose ⊕ mount``.
+
+    Parameters
+    ----------
+    pose
+        Robot pose ``(x, y, theta)`` in the world frame.
+    landmarks
+        ``(M, 2)`` landmark positions in the world frame.
+    mount
+        Laser pose in the robot frame.
+
+    Returns
+    -------
+    predicted : np.ndarray
+        ``(M, 2)`` predicted ``(range, bearing)``, bearings wrapped to ``(-pi, pi]``.
+    jacobians : np.ndarray
+        ``(M, 2, 3)`` derivatives of ``(range, bearing)`` with respect to the robot pose.
+
+    Examples
+    --------
+    >>> z, H = range_bearing_model([0.0, 0.0, 0.0], [[2.0, 0.0]], mount=[0.5, 0.0, 0.0])
+    >>> z.round(6)
+    array([[1.5, 0. ]])
+    >>> H[0].round(6)
+    array([[-1.      , -0.      , -0.      ],
+           [ 0.      , -0.666667, -1.333333]])
+    """
+    x, y, theta = (float(v) for v in np.asarray(pose, dtype=float)[:3])
+    mount_x, mount_y, mount_yaw = (float(v) for v in np.asarray(mount, dtype=float)[:3])
+    points = np.asarray(landmarks, dtype=float).reshape(-1, 2)
+    c, s = math.cos(theta), math.sin(theta)
+    sensor_x = x + c * mount_x - s * mount_y
+    sensor_y = y + s * mount_x + c * mount_y
+    # Derivatives of the sensor position with respect to the robot heading.
+    dsx_dtheta = -s * mount_x - c * mount_y
+    dsy_dtheta = c * mount_x - s * mount_y
+    dx = points[:, 0] - sensor_x
+    dy = points[:, 1] - sensor_y
+    range_sq = dx * dx + dy * dy
+    distance = np.sqrt(range_sq)
+    predicted = np.empty((points.shape[0], 2))
+    predicted[:, 0] = distance
+    predicted[:, 1] = wrap_angle(np.arctan2(dy, dx) - theta - mount_yaw)
+    jacobians = np.empty((points.shape[0], 2, 3))
+    jacobians[:, 0, 0] = -dx / distance
+    jacobians[:, 0, 1] = -dy / distance
+    jacobians[:, 0, 2] = -(dx * dsx_dtheta + dy * dsy_dtheta) / distance
+    jacobians[:, 1, 0] = dy / range_sq
+    jacobians[:, 1, 1] = -dx / range_sq
+    jacobians[:, 1, 2] = (dy * dsx_dtheta - dx * dsy_dtheta) / range_sq - 1.0
+    return predicted, jacobians
+
+
+def mahalanobis_matrix(
+    observations: Sequence[LandmarkObservation],
+    predicted: np.ndarray,
+    jacobians: np.ndarray,
+    robot_cov: ArrayLike,
+) -> np.ndarray:
+    """Return the ``(K, M)`` squared Mahalanobis distances of observations to landmarks.
+
+    Uses the innovation covariance ``H P Hᵀ + R`` of each pair, the bearing innovation
+    wrapped to ``(-pi, pi]``. ``predicted`` and ``jacobians`` come from
+    ``range_bearing_model``.
+
+    Examples
+    --------
+    >>> z, H = range_bearing_model([0.0, 0.0, 0.0], [[2.0, 0.0]])
+    >>> obs = LandmarkObservation(2.1, 0.0, np.diag([0.01, 1e-4]), [0])
+    >>> mahalanobis_matrix([obs], z, H, np.zeros((3, 3))).round(6)
+    array([[1.]])
+    """
+    count = len(observations)
+    if count == 0 or predicted.shape[0] == 0:
+        return np.zeros((count, predicted.shape[0]))
+    robot_cov = np.asarray(robot_cov, dtype=float)
+    measured = np.array([(obs.range, obs.bearing) for obs in observations])
+    noise = np.array([obs.covariance for obs in observations])
+    # H P Hᵀ for every landmark, then add each observation's own noise: (K, M, 2, 2).
+    projected = np.einsum("mij,jk,mlk->mil", jacobians, robot_cov, jacobians)
+    innovation_cov = projected[None, :, :, :] + noise[:, None, :, :]
+    innovation = measured[:, None, :] - predicted[None, :, :]
+    innovation[..., 1] = wrap_angle(innovation[..., 1])
+    a = innovation_cov[..., 0, 0]
+    b = innovation_cov[..., 0, 1]
+    c = innovation_cov[..., 1, 0]
+    d = innovation_cov[..., 1, 1]
+    determinant = a * d - b * c
+    u, v = innovation[..., 0], innovation[..., 1]
+    return (d * u * u - (b + c) * u * v + a * v * v) / determinant
+
+
+def associate_landmarks(
+    observations: Sequence[LandmarkObservation],
+    landmarks: ArrayLike,
+    robot_pose: ArrayLike,
+    robot_cov: ArrayLike,
+    mount: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    gate: float = CHI2_2DOF_99,
+) -> list[tuple[int, int]]:
+    """Match observations to map landmarks by a Mahalanobis gate, refusing ambiguity.
+
+    A pair ``(k, m)`` is returned only if landmark ``m`` is the sole landmark inside the
+    gate of observation ``k`` AND ``k`` is the sole observation inside the gate of ``m``:
+    with two candidates either way, a wrong match would corrupt the filter, so neither
+    is used.
+
+    Parameters
+    ----------
+    observations
+        Detected posts (sensor frame).
+    landmarks
+        ``(M, 2)`` landmark map, world frame.
+    robot_pose, robot_cov
+        Current robot pose estimate and its ``(3, 3)`` covariance.
+    mount
+        Laser pose in the robot frame.
+    gate
+        Threshold on the squared Mahalanobis distance (default: chi-square 2 dof, 99%).
+
+    Returns
+    -------
+    list of (int, int)
+        ``(observation index, landmark index)`` pairs, by observation index.
+
+    Examples
+    --------
+    >>> obs = LandmarkObservation(2.0, 0.0, np.diag([1e-4, 1e-4]), [0])
+    >>> associate_landmarks([obs], [[2.0, 0.0], [2.0, 0.1]], [0, 0, 0], np.zeros((3, 3)))
+    [(0, 0)]
+    >>> associate_landmarks([obs], [[2.0, 0.0], [2.0, 0.01]], [0, 0, 0], np.zeros((3, 3)))
+    []
+    """
+    predicted, jacobians = range_bearing_model(robot_pose, landmarks, mount)
+    distances = mahalanobis_matrix(observations, predicted, jacobians, robot_cov)
+    return pairs_inside_gate(distances, gate)
+
+
+def pairs_inside_gate(distances: np.ndarray, gate: float) -> list[tuple[int, int]]:
+    """Return the unambiguous ``(row, column)`` pairs of a gated distance matrix.
+
+    Examples
+    --------
+    >>> pairs_inside_gate(np.array([[1.0, 50.0], [2.0, 60.0], [70.0, 3.0]]), 9.0)
+    [(2, 1)]
+    """
+    inside = distances < gate
+    if inside.size == 0:
+        return []
+    columns = inside.argmax(axis=1)
+    unique = (inside.sum(axis=1) == 1) & (inside.sum(axis=0)[columns] == 1)
+    rows = np.flatnonzero(unique)
+    return list(zip(rows.tolist(), columns[rows].tolist(), strict=True))
