@@ -64,7 +64,7 @@ class MapperParams:
     """
 
     # extraction
-    outlier_k: int = 2
+    outlier_k: int = 4  # alpha < sqrt(2k) is needed to remove anything (extraction.py)
     outlier_alpha: float = 2.5
     breakpoint_lambda: float = math.radians(10.0)
     breakpoint_sigma_r: float = 0.012

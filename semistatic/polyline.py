@@ -1,0 +1,172 @@
+"""The polyline: an ordered vertex list that remembers which laser beams it came from.
+
+A polyline is an ``(N, 2)`` float64 vertex array plus the scan index of each vertex
+(DESIGN.md, conventions). The restricted Hausdorff distance and the merge rely on the
+vertex order, and scan polylines run counter-clockwise around the viewpoint. Both arrays
+are read-only, so a ``Polyline`` can be shared and its derived quantities cached.
+
+Examples
+--------
+>>> line = Polyline([[0.0, 0.0], [3.0, 4.0], [3.0, 5.0]])
+>>> len(line), line.length, line.scan_indices
+(3, 6.0, array([0, 1, 2]))
+>>> as_polyline(line) is line
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from semistatic.frames import transform_points
+
+__all__ = ["Polyline", "as_polyline"]
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    # Never freeze the caller's own array: copy when it is still writeable.
+    if array.flags.writeable:
+        array = array.copy()
+        array.flags.writeable = False
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Polyline:
+    """An ordered 2D polyline with the scan (beam) index of every vertex.
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` vertices in metres, in traversal order (for scan polylines: counter-
+        clockwise around the viewpoint). Stored as a read-only float64 array. ``N`` may be
+        0 or 1: the metrics document how they treat such degenerate polylines.
+    scan_indices
+        ``(N,)`` integer index of the beam (or of the merged beam position) of each
+        vertex; defaults to ``arange(N)``. Stored read-only as int64.
+
+    Examples
+    --------
+    >>> Polyline([[0, 0], [1, 0]], scan_indices=[10, 42]).scan_indices
+    array([10, 42])
+    >>> Polyline([[0, 0], [np.nan, 0]])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: Polyline: points must be finite ...
+    """
+
+    points: np.ndarray
+    scan_indices: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        points = np.asarray(self.points, dtype=np.float64)
+        if points.size == 0:
+            points = points.reshape(0, 2)
+        if points.ndim != 2 or points.shape[1] != 2:
+            raise ValueError(
+                f"Polyline: points must have shape (N, 2), got {points.shape}; "
+                "pass one (x, y) row per vertex"
+            )
+        if not np.isfinite(points).all():
+            raise ValueError(
+                "Polyline: points must be finite (no nan/inf); drop invalid laser "
+                "readings before building a polyline"
+            )
+        if self.scan_indices is None:
+            indices = np.arange(points.shape[0], dtype=np.int64)
+        else:
+            indices = np.asarray(self.scan_indices).reshape(-1)
+            if indices.size and not np.issubdtype(indices.dtype, np.integer):
+                raise ValueError(
+                    f"Polyline: scan_indices must be integers, got dtype {indices.dtype}"
+                )
+            indices = indices.astype(np.int64, copy=False)
+            if indices.shape[0] != points.shape[0]:
+                raise ValueError(
+                    f"Polyline: scan_indices has {indices.shape[0]} entries but points has "
+                    f"{points.shape[0]} rows; pass one scan index per vertex"
+                )
+        object.__setattr__(self, "points", _read_only(points))
+        object.__setattr__(self, "scan_indices", _read_only(indices))
+
+    @classmethod
+    def _trusted(cls, points: np.ndarray, scan_indices: np.ndarray) -> Polyline:
+        """Wrap fresh arrays already known valid, skipping the checks (hot paths only).
+
+        ``points`` must be a finite ``(N, 2)`` float64 array and ``scan_indices`` an
+        ``(N,)`` int64 array, both owned by the new polyline (they are frozen in place).
+        """
+        line = object.__new__(cls)
+        points.flags.writeable = False
+        scan_indices.flags.writeable = False
+        object.__setattr__(line, "points", points)
+        object.__setattr__(line, "scan_indices", scan_indices)
+        return line
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def __repr__(self) -> str:
+        return f"Polyline({len(self)} vertices, length={self.length:.3f} m)"
+
+    @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """Return the ``(N - 1,)`` edge lengths (read-only; empty for N < 2).
+
+        Examples
+        --------
+        >>> Polyline([[0, 0], [0, 2], [0, 2]]).edge_lengths
+        array([2., 0.])
+        """
+        lengths = np.hypot(*np.diff(self.points, axis=0).T)
+        lengths.flags.writeable = False
+        return lengths
+
+    @property
+    def length(self) -> float:
+        """Return the arc length in metres (0 for fewer than two vertices).
+
+        Examples
+        --------
+        >>> Polyline([[0, 0], [1, 0], [1, 1]]).length
+        2.0
+        """
+        return float(self.edge_lengths.sum())
+
+    def transformed(self, pose: ArrayLike) -> Polyline:
+        """Return the polyline mapped from the frame of ``pose`` into its parent frame.
+
+        The scan indices are kept, e.g. to move a scan polyline from the sensor frame into
+        the map frame with the sensor pose.
+
+        Examples
+        --------
+        >>> moved = Polyline([[1.0, 0.0]], scan_indices=[7]).transformed([0.0, 1.0, np.pi / 2])
+        >>> moved.points.round(12), moved.scan_indices
+        (array([[0., 2.]]), array([7]))
+        """
+        return Polyline(transform_points(pose, self.points), self.scan_indices)
+
+
+def as_polyline(obj: Polyline | ArrayLike) -> Polyline:
+    """Return ``obj`` as a :class:`Polyline` (a ``Polyline`` passes through unchanged).
+
+    Parameters
+    ----------
+    obj
+        A ``Polyline`` or an ``(N, 2)`` array-like of vertices (scan indices ``0..N-1``).
+
+    Examples
+    --------
+    >>> as_polyline([[0, 0], [2, 0]]).length
+    2.0
+    >>> len(as_polyline(np.empty((0, 2))))
+    0
+    """
+    if isinstance(obj, Polyline):
+        return obj
+    return Polyline(obj)
