@@ -16,19 +16,30 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.colors import to_rgb
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Polygon
+from numpy.typing import ArrayLike
 
 from robots.path import SplinePath
 from semistatic.frames import transform_points
-from worlds.spec import WorldSpec
+from worlds.spec import PostSpec, WallSpec, WorldSpec
 
-__all__ = ["main", "plot_world", "save_world_figure"]
+__all__ = [
+    "COLORS",
+    "draw_box",
+    "draw_posts",
+    "draw_walls",
+    "figure_size",
+    "main",
+    "plot_world",
+    "save_world_figure",
+]
 
 FIELD_POSES_PER_SEGMENT = 3
 """Poses per segment at which its fields are drawn (start, middle, end)."""
@@ -38,6 +49,9 @@ FIELD_END_INSET = 0.15
 
 FOOTPRINT_HALF = (0.455 / 2, 0.381 / 2)
 """Half length and half width (m) of the Pioneer 3-DX base drawn at the path start."""
+
+MIN_POST_RADIUS = 0.06
+"""Posts are drawn at least this big (m): real ones (4 cm) vanish at a whole-world scale."""
 
 DPI = 150
 AXES_WIDTH = 7.5  # inches of plot area
@@ -60,6 +74,73 @@ COLORS = {
 def _field_poses(path: SplinePath, start_s: float, end_s: float) -> np.ndarray:
     inset = min(FIELD_END_INSET, 0.25 * (end_s - start_s))
     return path.pose(np.linspace(start_s + inset, end_s - inset, FIELD_POSES_PER_SEGMENT))
+
+
+def draw_walls(ax: Axes, walls: Iterable[WallSpec], *, color: str = COLORS["wall"]) -> None:
+    """Fill each wall's footprint on ``ax`` in ``color``.
+
+    Examples
+    --------
+    >>> from matplotlib.figure import Figure
+    >>> from worlds.spec import WallSpec
+    >>> ax = Figure().subplots()
+    >>> draw_walls(ax, [WallSpec((0, 0), (4, 0)), WallSpec((4, 0), (4, 3))])
+    >>> len(ax.patches)
+    2
+    """
+    for wall in walls:
+        ax.add_patch(Polygon(wall.corners(), closed=True, color=color, zorder=3))
+
+
+def draw_posts(ax: Axes, posts: Iterable[PostSpec], *, color: str = COLORS["post"]) -> None:
+    """Draw each reflective post as a disc (at least 6 cm in radius, to stay visible).
+
+    Examples
+    --------
+    >>> from matplotlib.figure import Figure
+    >>> from worlds.spec import PostSpec
+    >>> ax = Figure().subplots()
+    >>> draw_posts(ax, [PostSpec(1.0, 2.0)])
+    >>> ax.patches[0].radius
+    0.06
+    """
+    for post in posts:
+        radius = max(post.radius, MIN_POST_RADIUS)
+        ax.add_patch(Circle(post.xy, radius, color=color, zorder=4))
+
+
+def draw_box(ax: Axes, corners: ArrayLike, name: str, *, outline: bool = False) -> None:
+    """Draw a semi-static box footprint ``corners`` (4, 2) and its ``name`` below it.
+
+    A filled brown box by default; with ``outline`` only a dashed brown outline over a
+    faint fill, so that lines drawn on top (a map of the box) stay visible.
+
+    Examples
+    --------
+    >>> from matplotlib.figure import Figure
+    >>> ax = Figure().subplots()
+    >>> draw_box(ax, [[0, 0], [1, 0], [1, 1], [0, 1]], "crate", outline=True)
+    >>> ax.patches[0].get_linestyle(), ax.texts[0].get_text()
+    ('--', 'crate')
+    """
+    corners = np.asarray(corners, dtype=float)
+    if outline:
+        style = {"facecolor": (*to_rgb(COLORS["box"]), 0.15), "edgecolor": COLORS["box"]}
+        style |= {"linestyle": "--", "linewidth": 1.2}
+    else:
+        style = {"facecolor": COLORS["box"], "edgecolor": "black", "alpha": 0.8}
+    ax.add_patch(Polygon(corners, closed=True, zorder=4, **style))
+    ax.annotate(
+        name,
+        corners.mean(axis=0),
+        textcoords="offset points",
+        xytext=(0, -18),
+        ha="center",
+        fontsize=7,
+        color=COLORS["box"],
+        bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 0.5},
+        zorder=6,
+    )
 
 
 def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
@@ -85,32 +166,10 @@ def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
         _, ax = plt.subplots(figsize=(9, 6.5))
     path = SplinePath(spec.path.knots)
 
-    for wall in spec.walls:
-        ax.add_patch(Polygon(wall.corners(), closed=True, color=COLORS["wall"], zorder=3))
-    for post in spec.posts:
-        ax.add_patch(Circle(post.xy, max(post.radius, 0.06), color=COLORS["post"], zorder=4))
+    draw_walls(ax, spec.walls)
+    draw_posts(ax, spec.posts)
     for box in spec.boxes:
-        ax.add_patch(
-            Polygon(
-                box.corners(),
-                closed=True,
-                facecolor=COLORS["box"],
-                edgecolor="black",
-                alpha=0.8,
-                zorder=4,
-            )
-        )
-        ax.annotate(
-            box.name,
-            box.pose[:2],
-            textcoords="offset points",
-            xytext=(0, -18),
-            ha="center",
-            fontsize=7,
-            color=COLORS["box"],
-            bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 0.5},
-            zorder=6,
-        )
+        draw_box(ax, box.corners(), box.name)
 
     for index, segment in enumerate(spec.path.segments):
         start_s = float(path.knot_s[segment.start_knot])

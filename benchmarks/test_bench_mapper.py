@@ -1,0 +1,76 @@
+"""Speed of the full mapper update: extract + associate + merge + join + life cycle.
+
+One 541-beam scan (270 deg, 0.5 deg, 1 cm noise) of 14 boxes and 6 wall panels around
+the sensor against a map of their 20 polylines, built from the first scans. Prints the
+median per update and the split by stage. Run with
+``.venv/bin/python -m pytest -m bench benchmarks/test_bench_mapper.py -s``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from semistatic.mapper import PolylineMap
+from tests.semistatic.synthetic import box, cast_scan, scene, wall
+
+SCANS = 300
+STAGES = ("extract", "associate", "merge", "join", "life_cycle")
+
+
+def hall() -> np.ndarray:
+    """Twenty objects around the sensor, none hiding another: 14 boxes and 6 wall panels."""
+    parts = []
+    for k in range(20):
+        bearing = math.radians(-128.0 + 256.0 * k / 19)
+        reach = 2.5 + 0.5 * (k % 3)
+        center = (reach * math.cos(bearing), reach * math.sin(bearing))
+        if k % 10 in (0, 3, 7):
+            tangent = (-math.sin(bearing) * 0.3, math.cos(bearing) * 0.3)
+            parts.append(
+                wall(
+                    (center[0] - tangent[0], center[1] - tangent[1]),
+                    (center[0] + tangent[0], center[1] + tangent[1]),
+                )
+            )
+        else:
+            parts.append(box(center, 0.4, 0.3, yaw=bearing + 0.4))
+    return scene(*parts)
+
+
+@pytest.mark.bench
+def test_mapper_update_time():
+    rng = np.random.default_rng(0)
+    segments = hall()
+    base = np.zeros(3)
+    steps = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02], (SCANS, 3))
+    poses = [base + step for step in steps]
+    scans = [
+        cast_scan(segments, pose, noise=0.01, rng=rng, stamp=0.08 * k)
+        for k, pose in enumerate(poses)
+    ]
+    mapper = PolylineMap()
+    for scan, pose in zip(scans[:3], poses[:3], strict=True):
+        mapper.update(scan, pose)
+    polylines = len(mapper)
+    totals, stages = [], {stage: [] for stage in STAGES}
+    for scan, pose in zip(scans[3:], poses[3:], strict=True):
+        timings: dict[str, float] = {}
+        start = time.perf_counter()
+        report = mapper.update(scan, pose, timings=timings)
+        totals.append(time.perf_counter() - start)
+        for stage in STAGES:
+            stages[stage].append(timings.get(stage, 0.0))
+    median_ms = 1e3 * float(np.median(totals))
+    split = ", ".join(f"{stage} {1e3 * float(np.median(stages[stage])):.3f}" for stage in STAGES)
+    print(
+        f"\nmapper update, {polylines} map polylines, {len(report.scan_polylines)} scan "
+        f"polylines, {len(report.associated)} pairs: median {median_ms:.3f} ms "
+        f"(p90 {1e3 * float(np.percentile(totals, 90)):.3f} ms); by stage (ms): {split}"
+    )
+    assert polylines == 20
+    assert len(mapper) == 20
+    assert math.isfinite(median_ms)

@@ -1,0 +1,763 @@
+"""A polyline map in one fixed frame and its update from one laser scan (paper Sec. 3-4).
+
+:class:`PolylineMap` runs the whole pipeline of the paper's Fig. 1 for one scan:
+extract polylines in the sensor frame, move them into the map frame with the sensor pose,
+sort the map polylines counter-clockwise from that viewpoint, associate, merge, insert the
+unassociated scan polylines as new objects, join overlapping polylines, and run the object
+life cycle (DESIGN.md detail 10):
+
+- an associated map polyline is ``"confirmed"`` (hits + 1, misses reset to 0);
+- an unassociated scan polyline becomes a ``"new"`` map polyline, reported at once;
+- an unassociated map polyline that *should have been visible* (:func:`should_be_visible`)
+  and is not where it was (the scan reads through it, :func:`is_missing`) is ``"blank"``
+  and counts a miss; after ``params.miss_limit`` consecutive misses it is deleted. One out
+  of view, out of range or occluded counts nothing and is never deleted, and neither does
+  one the scan still reads in place although the association did not pair it.
+
+Two choices beyond the paper: association compares the scan polylines as extracted, but
+what is merged or inserted has its ends moved half a beam gap outward
+(:func:`extend_ends`), which removes the shrinking of objects by the beam spacing; and a
+map polyline moves toward each observation by ``1 / (1 + min(hits, MAX_MERGE_WEIGHT))``
+(see :func:`semistatic.merge.merge`). Joins use the projection restriction unless
+``join_mode`` says otherwise.
+
+Ids are integers, never reused. The map has no notion of safety areas; a ``keep``
+predicate decides which new polylines are inserted (see :class:`semistatic.local_map.LocalMap`).
+
+Examples
+--------
+>>> angles = np.radians(np.arange(-45.0, 45.5, 0.5))
+>>> scan = Scan(ranges=2.0 / np.cos(angles), angle_min=angles[0],
+...             angle_increment=np.radians(0.5), stamp=1.0)
+>>> world = PolylineMap()
+>>> world.update(scan, (0.0, 0.0, 0.0)).new_ids
+(0,)
+>>> report = world.update(scan, (0.0, 0.0, 0.0))
+>>> report.new_ids, [(a.scan_index, a.map_id) for a in report.associated]
+((), [(0, 0)])
+>>> world[0].status, world[0].hits
+('confirmed', 2)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from semistatic.association import associate_with_distances
+from semistatic.extraction import extract_polylines
+from semistatic.frames import transform_points, untransform_points
+from semistatic.merge import join, merge
+from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
+from semistatic.polyline import Polyline, as_polyline
+from semistatic.types import Scan
+
+__all__ = [
+    "MAX_MERGE_WEIGHT",
+    "MIN_VISIBLE_FRACTION",
+    "MISSING_FRACTION",
+    "STATUSES",
+    "Association",
+    "BeamCounts",
+    "MapPolyline",
+    "PolylineMap",
+    "UpdateReport",
+    "expected_ranges",
+    "extend_ends",
+    "is_missing",
+    "should_be_visible",
+    "visible_beams",
+]
+
+STATUSES = ("new", "confirmed", "blank")
+
+# A map polyline moves toward each new observation by 1 / (1 + min(hits, this)): an
+# average over the first observations, then a running average over about this many, so
+# that an unchanged object converges and a slowly drifting estimate can still follow.
+MAX_MERGE_WEIGHT = 30
+
+# A map polyline should have been visible when at least this fraction of the beams that
+# would hit it in range are not occluded (and at least ``min_points`` beams, enough for
+# extraction to produce a polyline from them).
+MIN_VISIBLE_FRACTION = 0.5
+
+# An unassociated map polyline that should have been visible is missed when at least this
+# fraction of its unoccluded beams read clearly beyond it (it is not there any more).
+MISSING_FRACTION = 0.5
+
+# Beams (nearly) parallel to an edge do not hit it.
+PARALLEL_TOLERANCE = 1e-12
+
+# Largest end extension (m) of extend_ends: at grazing incidence the gap to the next beam
+# grows without bound, while the end it hides can only be this much farther on average.
+MAX_END_EXTENSION = 0.10
+
+
+@dataclass(frozen=True)
+class MapPolyline:
+    """One polyline of the map and its life-cycle state.
+
+    Parameters
+    ----------
+    id
+        Unique integer, never reused within a map.
+    polyline
+        The geometry, in the map's frame.
+    status
+        ``"new"`` (first seen in the last update that touched it), ``"confirmed"``
+        (associated again) or ``"blank"`` (missed while it should have been visible).
+    hits
+        Number of scans it was observed in (summed when polylines are joined).
+    misses
+        Consecutive scans it was missed in while it should have been visible.
+    first_seen, last_seen
+        Stamps (s) of the first and the last scan that observed it.
+
+    Examples
+    --------
+    >>> MapPolyline(3, Polyline([[0.0, 0.0], [1.0, 0.0]]), status="lost")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: MapPolyline.status must be one of ('new', 'confirmed', 'blank'), got 'lost'
+    """
+
+    id: int
+    polyline: Polyline
+    status: str = "new"
+    hits: int = 1
+    misses: int = 0
+    first_seen: float = 0.0
+    last_seen: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "polyline", as_polyline(self.polyline))
+        if self.status not in STATUSES:
+            raise ValueError(f"MapPolyline.status must be one of {STATUSES}, got {self.status!r}")
+        for name in ("id", "hits", "misses"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | np.integer) and value >= 0):
+                raise ValueError(f"MapPolyline.{name} must be an integer >= 0, got {value!r}")
+            object.__setattr__(self, name, int(value))
+
+
+@dataclass(frozen=True)
+class Association:
+    """A validated pair of one update: scan polyline index, map id, restricted Hausdorff.
+
+    Examples
+    --------
+    >>> Association(scan_index=0, map_id=7, distance=0.03).map_id
+    7
+    """
+
+    scan_index: int
+    map_id: int
+    distance: float
+
+
+@dataclass(frozen=True)
+class UpdateReport:
+    """What one :meth:`PolylineMap.update` did.
+
+    Parameters
+    ----------
+    stamp
+        The scan's stamp (s).
+    scan_polylines
+        The extracted scan polylines, in the map frame, in scan order.
+    associated
+        Validated pairs with their restricted Hausdorff distance (m), by scan index.
+    unassociated
+        Indices of the scan polylines associated with nothing.
+    new_ids
+        Ids of new map polylines (unassociated scan polylines that were kept and not
+        joined into an older polyline).
+    missed_ids
+        Ids of map polylines not associated although they should have been visible, and
+        not where they were (:func:`is_missing`).
+    deleted_ids
+        Ids deleted by the life cycle in this update.
+    joined
+        ``(absorbed id, surviving id)`` for polylines joined into another.
+
+    Examples
+    --------
+    >>> report = UpdateReport(stamp=2.0, new_ids=(4,))
+    >>> report.new_ids, report.deleted_ids
+    ((4,), ())
+    """
+
+    stamp: float
+    scan_polylines: tuple[Polyline, ...] = ()
+    associated: tuple[Association, ...] = ()
+    unassociated: tuple[int, ...] = ()
+    new_ids: tuple[int, ...] = ()
+    missed_ids: tuple[int, ...] = ()
+    deleted_ids: tuple[int, ...] = ()
+    joined: tuple[tuple[int, int], ...] = ()
+
+
+def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
+    """Return the range at which each beam would first hit a polyline (``inf``: no hit).
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` polyline vertices in the sensor frame. A single vertex is hit only by
+        the beam whose direction is nearest to it (within half a beam step).
+    angles
+        ``(B,)`` beam angles (rad) in the sensor frame, increasing.
+
+    Examples
+    --------
+    >>> expected_ranges([[2.0, -1.0], [2.0, 1.0]], [-np.pi / 8, 0.0, np.pi / 2]).round(3)
+    array([2.165, 2.   ,   inf])
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    angles = np.asarray(angles, dtype=float).reshape(-1)
+    ranges = np.full(angles.size, math.inf)
+    if points.shape[0] == 0 or angles.size == 0:
+        return ranges
+    if points.shape[0] == 1:
+        bearing = math.atan2(points[0, 1], points[0, 0])
+        beam = int(np.argmin(np.abs(np.angle(np.exp(1j * (angles - bearing))))))
+        step = float(np.median(np.diff(angles))) if angles.size > 1 else math.inf
+        if abs(math.remainder(angles[beam] - bearing, 2.0 * math.pi)) <= 0.5 * step:
+            ranges[beam] = float(np.hypot(points[0, 0], points[0, 1]))
+        return ranges
+    starts = points[:-1]
+    edges = np.diff(points, axis=0)
+    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    denominator = dx * edges[:, 1] - dy * edges[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along_beam = (starts[:, 0] * edges[:, 1] - starts[:, 1] * edges[:, 0]) / denominator
+        along_edge = (starts[:, 0] * dy - starts[:, 1] * dx) / denominator
+    hit = (
+        (np.abs(denominator) > PARALLEL_TOLERANCE)
+        & (along_beam > 0.0)
+        & (along_edge >= 0.0)
+        & (along_edge <= 1.0)
+    )
+    return np.where(hit, along_beam, math.inf).min(axis=1)
+
+
+def _half_gap(end: list[float], outward: list[float], beam: float) -> float:
+    """Return half the distance along ``outward`` from ``end`` to the beam at ``beam``."""
+    direction_x, direction_y = math.cos(beam), math.sin(beam)
+    across = direction_x * outward[1] - direction_y * outward[0]
+    if abs(across) <= PARALLEL_TOLERANCE:
+        return 0.0
+    along_edge = (end[0] * direction_y - end[1] * direction_x) / across
+    along_beam = (end[0] * outward[1] - end[1] * outward[0]) / across
+    if along_edge <= 0.0 or along_beam <= 0.0:
+        return 0.0
+    return 0.5 * along_edge
+
+
+def extend_ends(
+    polyline: Polyline | ArrayLike,
+    angle_increment: float,
+    *,
+    viewpoint: ArrayLike = (0.0, 0.0),
+    limit: float = MAX_END_EXTENSION,
+) -> Polyline:
+    """Return a scan polyline with each end moved half a beam gap outward.
+
+    The last beam that hits an object stops short of its true end, which lies somewhere
+    before the next beam would have crossed the object's edge line: on average half that
+    gap further. At grazing incidence the gap is many centimetres (9 cm at 3 m and 16 deg
+    for 0.5 deg beams), so maps built from raw ends shrink objects by half of it. Moving
+    each end along its edge by half the gap to the neighbouring beam (at most ``limit``)
+    removes that bias; an end cut by an occluder or the field of view is only extended
+    along a surface that goes on anyway.
+
+    Parameters
+    ----------
+    polyline
+        Scan polyline in scan (counter-clockwise) order, in any frame.
+    angle_increment
+        Beam step of the scan (rad).
+    viewpoint
+        Sensor position ``(x, y)`` (a pose's heading is ignored) in the polyline's frame;
+        default the origin, i.e. a polyline in the sensor frame.
+    limit
+        Largest extension (m).
+
+    Examples
+    --------
+    >>> wall = [[2.0, 0.0], [2.0, 1.0]]  # seen head-on from the origin
+    >>> extend_ends(wall, np.radians(1.0)).points.round(4)
+    array([[ 2.    , -0.0175],
+           [ 2.    ,  1.022 ]])
+    """
+    line = as_polyline(polyline)
+    if len(line) < 2:
+        return line
+    origin = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
+    points = line.points.tolist()
+    relative = [[x - origin[0], y - origin[1]] for x, y in points]
+    extended = [list(point) for point in points]
+    moved = False
+    for end, inner, beam_step in ((0, 1, -angle_increment), (-1, -2, angle_increment)):
+        outward = [relative[end][0] - relative[inner][0], relative[end][1] - relative[inner][1]]
+        norm = math.hypot(*outward)
+        if norm == 0.0:
+            continue
+        outward = [outward[0] / norm, outward[1] / norm]
+        beam = math.atan2(relative[end][1], relative[end][0]) + beam_step
+        shift = min(_half_gap(relative[end], outward, beam), limit)
+        if shift > 0.0:
+            x, y = points[end]
+            extended[end] = [x + shift * outward[0], y + shift * outward[1]]
+            moved = True
+    return Polyline(extended, line.scan_indices) if moved else line
+
+
+class BeamCounts(NamedTuple):
+    """Beams of one scan that concern one map polyline (see :func:`visible_beams`).
+
+    Examples
+    --------
+    >>> BeamCounts(in_view=10, unoccluded=8, seen_through=1).unoccluded
+    8
+    """
+
+    in_view: int
+    """Beams that would hit the polyline within the usable range."""
+    unoccluded: int
+    """Of those, beams that read at least about the expected range."""
+    seen_through: int
+    """Of those, beams that read clearly beyond it (or no return): it is not there."""
+
+
+def visible_beams(
+    polyline: Polyline | ArrayLike,
+    scan: Scan,
+    pose: ArrayLike,
+    *,
+    max_range: float = math.inf,
+    margin: float = 0.15,
+) -> BeamCounts:
+    """Count the beams of ``scan`` that would hit ``polyline``, unoccluded and seen through.
+
+    A beam is *in view* when it would hit the polyline within ``[range_min,
+    min(range_max, max_range)]``. It is *unoccluded* when, moreover, the scan read at least
+    about that range, ``r >= expected - margin``, and it *sees through* the polyline when
+    it read clearly beyond it, ``r > expected + margin`` (``inf``, no return, counts for
+    both). A ``nan`` reading tells nothing and counts as occluded.
+
+    Parameters
+    ----------
+    polyline
+        Map polyline in the frame of ``pose``.
+    scan
+        The scan (ranges and beam angles are used).
+    pose
+        Sensor pose ``(x, y, theta)`` in the map frame.
+    max_range, margin
+        Mapper range limit and occlusion margin (m).
+
+    Returns
+    -------
+    BeamCounts
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=[1.0, 2.0, 3.0, 3.0], angle_min=-0.15, angle_increment=0.1)
+    >>> tuple(visible_beams([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, 0.0)))
+    (4, 3, 2)
+    """
+    points = untransform_points(pose, as_polyline(polyline).points)
+    expected = expected_ranges(points, scan.angles())
+    limit = min(scan.range_max, max_range)
+    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= limit)
+    with np.errstate(invalid="ignore"):
+        unoccluded = in_view & (scan.ranges >= expected - margin)
+        seen_through = unoccluded & (scan.ranges > expected + margin)
+    return BeamCounts(int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum()))
+
+
+def should_be_visible(
+    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
+) -> bool:
+    """Return whether ``scan`` should have seen ``polyline`` (DESIGN.md detail 10).
+
+    True when at least ``params.min_points`` beams, and at least ``MIN_VISIBLE_FRACTION``
+    of the beams in view, see it unoccluded (:func:`visible_beams` with
+    ``params.max_range`` and ``params.visibility_margin``).
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
+    >>> should_be_visible([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, 0.0), MapperParams())
+    True
+    >>> should_be_visible([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, np.pi), MapperParams())
+    False
+    """
+    counts = visible_beams(
+        polyline, scan, pose, max_range=params.max_range, margin=params.visibility_margin
+    )
+    return _visible(counts, params)
+
+
+def _visible(counts: BeamCounts, params: MapperParams) -> bool:
+    needed = max(params.min_points, math.ceil(MIN_VISIBLE_FRACTION * counts.in_view))
+    return counts.unoccluded > 0 and counts.unoccluded >= needed
+
+
+def is_missing(
+    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
+) -> bool:
+    """Return whether ``polyline`` should have been seen and the scan reads through it.
+
+    This is a miss of the life cycle: :func:`should_be_visible`, and most
+    (``MISSING_FRACTION``) of its unoccluded beams read clearly beyond it. A polyline the
+    scan reads right where it is has not gone, even when the association failed to pair
+    it (a box first seen from one side and now from another, a partial view the gate
+    rejects): counting that as a miss would delete an object that is still there.
+
+    Examples
+    --------
+    >>> wall = [[2.0, -1.0], [2.0, 1.0]]
+    >>> far = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
+    >>> at_the_wall = Scan(ranges=2.0 / np.cos(far.angles()), angle_min=-0.1,
+    ...                    angle_increment=0.01)
+    >>> is_missing(wall, far, (0.0, 0.0, 0.0), MapperParams())
+    True
+    >>> is_missing(wall, at_the_wall, (0.0, 0.0, 0.0), MapperParams())
+    False
+    """
+    counts = visible_beams(
+        polyline, scan, pose, max_range=params.max_range, margin=params.visibility_margin
+    )
+    return _visible(counts, params) and counts.seen_through >= MISSING_FRACTION * counts.unoccluded
+
+
+class PolylineMap:
+    """A polyline map in one fixed frame with the paper's per-scan update.
+
+    Parameters
+    ----------
+    params
+        Thresholds; ``MapperParams()`` when omitted.
+    keep
+        Predicate on a new polyline (map frame): insert it only when true. Default: all.
+    join_mode
+        Restriction of the restricted Hausdorff distance that decides which polylines are
+        joined. Default ``"projection"`` whatever ``params.hausdorff_restriction`` says:
+        joining removes redundant copies, and a copy of part of a long wall simplified to
+        two vertices is exactly what the vertex restriction cannot recognise (DESIGN.md
+        detail 5). With ``"vertex"``, a robot driving along a corridor leaves dozens of
+        overlapping wall fragments in the map.
+
+    Examples
+    --------
+    >>> world = PolylineMap()
+    >>> world.add([[0.0, 0.0], [1.0, 0.0]], stamp=2.0)
+    0
+    >>> len(world), world[0].status, world.polylines()[0].length
+    (1, 'new', 1.0)
+    """
+
+    def __init__(
+        self,
+        params: MapperParams | None = None,
+        *,
+        keep: Callable[[Polyline], bool] | None = None,
+        join_mode: str = "projection",
+    ) -> None:
+        if join_mode not in HAUSDORFF_RESTRICTIONS:
+            raise ValueError(
+                f"PolylineMap: join_mode must be one of {HAUSDORFF_RESTRICTIONS}, got {join_mode!r}"
+            )
+        self.params = MapperParams() if params is None else params
+        self.join_mode = join_mode
+        self._keep = keep
+        self._entries: dict[int, MapPolyline] = {}
+        self._next_id = 0
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __iter__(self) -> Iterator[MapPolyline]:
+        return iter(list(self._entries.values()))
+
+    def __contains__(self, map_id: object) -> bool:
+        return map_id in self._entries
+
+    def __getitem__(self, map_id: int) -> MapPolyline:
+        return self._entries[map_id]
+
+    @property
+    def entries(self) -> Mapping[int, MapPolyline]:
+        """Return a read-only view of the map polylines by id."""
+        return MappingProxyType(self._entries)
+
+    @property
+    def next_id(self) -> int:
+        """Return the id the next new polyline will get."""
+        return self._next_id
+
+    def polylines(self) -> dict[int, Polyline]:
+        """Return the geometry of every map polyline by id."""
+        return {map_id: entry.polyline for map_id, entry in self._entries.items()}
+
+    def add(self, polyline: Polyline | ArrayLike, *, stamp: float = 0.0) -> int:
+        """Insert a polyline as a new object (no association) and return its id.
+
+        Examples
+        --------
+        >>> PolylineMap().add([[0.0, 0.0], [1.0, 0.0]])
+        0
+        """
+        map_id = self._next_id
+        self._next_id += 1
+        self._entries[map_id] = MapPolyline(
+            map_id, as_polyline(polyline), "new", 1, 0, stamp, stamp
+        )
+        return map_id
+
+    def restore(self, entry: MapPolyline, *, next_id: int | None = None) -> None:
+        """Put back a saved entry with its id and state (e.g. when loading a map).
+
+        Raises ``ValueError`` if the id is taken. ``next_id`` (default: one past the largest
+        id seen) keeps ids of deleted polylines from being reused.
+
+        Examples
+        --------
+        >>> world = PolylineMap()
+        >>> world.restore(MapPolyline(5, Polyline([[0.0, 0.0], [1.0, 0.0]]), "confirmed", 9))
+        >>> world.next_id, world[5].hits
+        (6, 9)
+        """
+        if entry.id in self._entries:
+            raise ValueError(f"PolylineMap.restore: id {entry.id} is already in the map")
+        self._entries[entry.id] = entry
+        self._next_id = max(self._next_id, entry.id + 1, 0 if next_id is None else next_id)
+
+    def update(
+        self,
+        scan: Scan,
+        pose: ArrayLike,
+        *,
+        merge: bool = True,
+        timings: dict[str, float] | None = None,
+    ) -> UpdateReport:
+        """Update the map with one scan (extract, associate, merge, insert, join, life cycle).
+
+        Parameters
+        ----------
+        scan
+            The laser scan; its own ``pose`` field is not used.
+        pose
+            Sensor pose ``(x, y, theta)`` in this map's frame (e.g. from the EKF).
+        merge
+            ``False`` only associates: the map is not changed at all (no merge, no new
+            polylines, no life cycle), as in the paper's Table 1 experiment; the report
+            still lists the pairs, their distances and the missed ids.
+        timings
+            If given, the seconds spent in each stage are added to it under ``"extract"``,
+            ``"associate"``, ``"merge"``, ``"join"`` and ``"life_cycle"``.
+
+        Returns
+        -------
+        UpdateReport
+
+        Examples
+        --------
+        >>> scan = Scan(ranges=np.full(61, 2.0), angle_min=-0.3, angle_increment=0.01)
+        >>> world = PolylineMap()
+        >>> world.update(scan, (1.0, 0.0, 0.0)).new_ids
+        (0,)
+        >>> report = world.update(scan, (1.0, 0.0, 0.0), merge=False)
+        >>> [(pair.scan_index, pair.map_id, round(pair.distance, 3)) for pair in report.associated]
+        [(0, 0, 0.0)]
+        """
+        clock = _StageClock(timings)
+        params = self.params
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        stamp = scan.stamp
+        scan_lines = _transformed(extract_polylines(scan, params), pose)
+        clock.lap("extract")
+
+        ids = list(self._entries)
+        triples = associate_with_distances(
+            scan_lines,
+            [self._entries[map_id].polyline for map_id in ids],
+            params.gate,
+            viewpoint=pose,
+            mode=params.hausdorff_restriction,
+        )
+        associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
+        paired_scans = {pair.scan_index for pair in associated}
+        paired_ids = {pair.map_id for pair in associated}
+        unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
+        unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
+        clock.lap("associate")
+
+        if not merge:
+            missed = tuple(
+                map_id
+                for map_id in unpaired_ids
+                if is_missing(self._entries[map_id].polyline, scan, pose, params)
+            )
+            clock.lap("life_cycle")
+            return UpdateReport(stamp, scan_lines, associated, unassociated, missed_ids=missed)
+
+        # Association compares what the scan saw; the map takes the unbiased ends.
+        observed = tuple(
+            extend_ends(line, scan.angle_increment, viewpoint=pose) for line in scan_lines
+        )
+        changed = self._merge_associated(observed, associated, stamp)
+        new_ids = self._insert_new(observed, unassociated, stamp)
+        changed.update(new_ids)
+        clock.lap("merge")
+
+        joined = self._join(changed, set(new_ids))
+        absorbed = {gone for gone, _ in joined}
+        joined_survivors = {kept for _, kept in joined}
+        inserted = set(new_ids)
+        # A new polyline joined into an older one is that object seen again, not a new one.
+        new_ids = [
+            map_id
+            for map_id in new_ids
+            if map_id not in absorbed
+            and all(gone in inserted for gone, kept in joined if kept == map_id)
+        ]
+        clock.lap("join")
+
+        missed, deleted = [], []
+        for map_id in unpaired_ids:
+            if map_id in absorbed or map_id in joined_survivors:
+                continue
+            entry = self._entries[map_id]
+            if not is_missing(entry.polyline, scan, pose, params):
+                continue
+            missed.append(map_id)
+            if entry.misses + 1 >= params.miss_limit:
+                del self._entries[map_id]
+                deleted.append(map_id)
+            else:
+                self._entries[map_id] = dataclasses.replace(
+                    entry, status="blank", misses=entry.misses + 1
+                )
+        clock.lap("life_cycle")
+        return UpdateReport(
+            stamp,
+            scan_lines,
+            associated,
+            unassociated,
+            new_ids=tuple(new_ids),
+            missed_ids=tuple(missed),
+            deleted_ids=tuple(deleted),
+            joined=tuple(joined),
+        )
+
+    def _merge_associated(
+        self, scan_lines: tuple[Polyline, ...], associated: tuple[Association, ...], stamp: float
+    ) -> set[int]:
+        by_map: dict[int, list[int]] = {}
+        for pair in associated:
+            by_map.setdefault(pair.map_id, []).append(pair.scan_index)
+        for map_id, scan_indices in by_map.items():
+            entry = self._entries[map_id]
+            line = entry.polyline
+            weight = float(min(entry.hits, MAX_MERGE_WEIGHT))
+            for index in scan_indices:
+                line = merge(line, scan_lines[index], self.params.epsilon, map_weight=weight)
+            self._entries[map_id] = dataclasses.replace(
+                entry,
+                polyline=line,
+                status="confirmed",
+                hits=entry.hits + 1,
+                misses=0,
+                last_seen=stamp,
+            )
+        return set(by_map)
+
+    def _insert_new(
+        self, scan_lines: tuple[Polyline, ...], unassociated: tuple[int, ...], stamp: float
+    ) -> list[int]:
+        new_ids = []
+        for index in unassociated:
+            if self._keep is None or self._keep(scan_lines[index]):
+                new_ids.append(self.add(scan_lines[index], stamp=stamp))
+        return new_ids
+
+    def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
+        if not changed:
+            return []
+        ids = list(self._entries)
+        entries = [self._entries[map_id] for map_id in ids]
+        groups = join(
+            [entry.polyline for entry in entries],
+            self.params.gate,
+            self.params.epsilon,
+            self.join_mode,
+            weights=[min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries],
+            candidates=[k for k, map_id in enumerate(ids) if map_id in changed],
+        )
+        joined = []
+        for line, members in groups:
+            if len(members) == 1:
+                continue
+            parts = [entries[k] for k in members]
+            survivor = min(parts, key=lambda entry: entry.id)
+            touched = any(part.id in changed for part in parts)
+            # Parts all inserted by this scan are one new object seen in pieces; anything
+            # older joined with what this scan saw has been observed again.
+            if all(part.id in inserted for part in parts):
+                status = "new"
+            elif touched or any(part.status == "confirmed" for part in parts):
+                status = "confirmed"
+            else:
+                status = survivor.status
+            self._entries[survivor.id] = dataclasses.replace(
+                survivor,
+                polyline=line,
+                status=status,
+                hits=sum(part.hits for part in parts),
+                misses=0 if touched else min(part.misses for part in parts),
+                first_seen=min(part.first_seen for part in parts),
+                last_seen=max(part.last_seen for part in parts),
+            )
+            for part in parts:
+                if part.id != survivor.id:
+                    del self._entries[part.id]
+                    joined.append((part.id, survivor.id))
+        return joined
+
+
+def _transformed(lines: list[Polyline], pose: np.ndarray) -> tuple[Polyline, ...]:
+    """Return sensor-frame polylines in the map frame (one transform for all of them)."""
+    if not lines:
+        return ()
+    points = transform_points(pose, np.concatenate([line.points for line in lines]))
+    bounds = np.cumsum([0, *(len(line) for line in lines)]).tolist()
+    return tuple(
+        Polyline(points[start:stop], line.scan_indices)
+        for line, start, stop in zip(lines, bounds[:-1], bounds[1:], strict=True)
+    )
+
+
+class _StageClock:
+    """Add the wall time between laps to a dict of stage durations (when one is given)."""
+
+    def __init__(self, timings: dict[str, float] | None) -> None:
+        self._timings = timings
+        self._last = time.perf_counter() if timings is not None else 0.0
+
+    def lap(self, stage: str) -> None:
+        if self._timings is None:
+            return
+        now = time.perf_counter()
+        self._timings[stage] = self._timings.get(stage, 0.0) + now - self._last
+        self._last = now

@@ -1,0 +1,365 @@
+"""The polyline map update and the object life cycle (paper Sec. 3-4, DESIGN.md detail 10)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from semistatic.extraction import extract_polylines
+from semistatic.hausdorff import hausdorff
+from semistatic.mapper import (
+    MapPolyline,
+    PolylineMap,
+    expected_ranges,
+    extend_ends,
+    is_missing,
+    should_be_visible,
+    visible_beams,
+)
+from semistatic.params import MapperParams
+from semistatic.types import Scan
+from tests.semistatic.conftest import NASTY_SCANS
+from tests.semistatic.synthetic import box, cast_scan, raycast, scene, wall
+
+ORIGIN = np.zeros(3)
+BOX = box((2.5, -1.0), 0.6, 0.4)
+# The two faces of BOX seen from around the origin, in scan order.
+BOX_TRUTH = np.array([[2.2, -1.2], [2.2, -0.8], [2.8, -0.8]])
+WALL = wall((4.0, 2.0), (1.0, 2.0))
+WALL_TRUTH = WALL[0]
+
+
+def jitter(rng, spread=0.1, turn=0.03):
+    step = [rng.uniform(-spread, spread), rng.uniform(-spread, spread), rng.uniform(-turn, turn)]
+    return ORIGIN + np.array(step)
+
+
+def build(world, scans=3, params=None, pose=ORIGIN):
+    mapper = PolylineMap(params)
+    for k in range(scans):
+        mapper.update(cast_scan(world, pose, stamp=float(k)), pose)
+    return mapper
+
+
+def id_nearest(mapper, truth):
+    return min(mapper.polylines().items(), key=lambda item: hausdorff(item[1], truth))[0]
+
+
+def test_merge_converges_on_an_unchanged_box_and_wall():
+    """Acceptance: 200 noisy observations keep one polyline per object, few vertices, 2 cm."""
+    world = scene(BOX, WALL)
+    noise_free = [len(line) for line in extract_polylines(cast_scan(world, ORIGIN))]
+    assert sorted(noise_free) == [2, 3]
+    limit = {"box": 2 * 3, "wall": 2 * 2}
+    rng = np.random.default_rng(0)
+    mapper = PolylineMap()
+    most = {"box": 0, "wall": 0}
+    for k in range(200):
+        pose = jitter(rng)
+        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.08 * k), pose)
+        assert len(mapper) == 2
+        box_id, wall_id = id_nearest(mapper, BOX_TRUTH), id_nearest(mapper, WALL_TRUTH)
+        assert box_id != wall_id
+        most["box"] = max(most["box"], len(mapper[box_id].polyline))
+        most["wall"] = max(most["wall"], len(mapper[wall_id].polyline))
+    assert most["box"] <= limit["box"]
+    assert most["wall"] <= limit["wall"]
+    assert hausdorff(mapper[box_id].polyline, BOX_TRUTH) < 0.02
+    assert hausdorff(mapper[wall_id].polyline, WALL_TRUTH) < 0.02
+    assert mapper[box_id].hits == 200
+    assert mapper[box_id].status == "confirmed"
+
+
+@pytest.mark.parametrize("miss_limit", [1, 3, 5])
+def test_removed_object_is_deleted_after_exactly_k_visible_misses(miss_limit):
+    params = MapperParams(miss_limit=miss_limit)
+    mapper = build(scene(BOX, WALL), params=params)
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    without_box = scene(WALL)
+    for miss in range(1, miss_limit + 1):
+        report = mapper.update(cast_scan(without_box, ORIGIN, stamp=10.0 + miss), ORIGIN)
+        assert report.missed_ids == (box_id,)
+        if miss < miss_limit:
+            assert report.deleted_ids == ()
+            assert mapper[box_id].status == "blank"
+            assert mapper[box_id].misses == miss
+        else:
+            assert report.deleted_ids == (box_id,)
+            assert box_id not in mapper
+    assert len(mapper) == 1
+
+
+def test_misses_count_only_consecutive_visible_scans():
+    params = MapperParams(miss_limit=3)
+    world = scene(BOX, WALL)
+    mapper = build(world, params=params)
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    for _ in range(2):
+        mapper.update(cast_scan(scene(WALL), ORIGIN), ORIGIN)
+    assert mapper[box_id].misses == 2
+    report = mapper.update(cast_scan(world, ORIGIN), ORIGIN)
+    assert box_id in {pair.map_id for pair in report.associated}
+    assert (mapper[box_id].status, mapper[box_id].misses) == ("confirmed", 0)
+
+
+def test_object_out_of_view_is_never_deleted():
+    params = MapperParams(miss_limit=2)
+    mapper = build(scene(BOX, WALL), params=params)
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    facing_away = np.array([0.0, 0.0, math.radians(160.0)])  # the box is in the blind spot
+    for k in range(10):
+        report = mapper.update(cast_scan(scene(WALL), facing_away, stamp=k), facing_away)
+        assert box_id not in report.missed_ids
+    assert (mapper[box_id].status, mapper[box_id].misses) == ("confirmed", 0)
+
+
+def test_object_out_of_range_is_never_deleted():
+    params = MapperParams(miss_limit=2, max_range=2.0)
+    world = scene(BOX, wall((1.5, -0.3), (1.5, 0.3)))
+    mapper = build(world, params=MapperParams(miss_limit=2))
+    mapper.params = params  # the box (2.2 m and farther) is now beyond the mapper's range
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    for k in range(10):
+        report = mapper.update(cast_scan(scene(wall((1.5, -0.3), (1.5, 0.3))), ORIGIN), ORIGIN)
+        assert box_id not in report.missed_ids, k
+    assert box_id in mapper
+
+
+def test_occluded_object_is_never_deleted():
+    params = MapperParams(miss_limit=2)
+    mapper = build(scene(BOX, WALL), params=params)
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    screen = wall((1.2, -1.0), (1.2, -0.2))  # in front of the box; the box itself is gone
+    for k in range(10):
+        report = mapper.update(cast_scan(scene(screen, WALL), ORIGIN, stamp=k), ORIGIN)
+        assert box_id not in report.missed_ids
+    assert box_id in mapper
+    assert mapper[box_id].misses == 0
+
+
+def test_new_object_is_reported_on_its_first_scan():
+    mapper = build(scene(WALL))
+    assert len(mapper) == 1
+    world = scene(BOX, WALL)
+    first = mapper.update(cast_scan(world, ORIGIN, stamp=5.0), ORIGIN)
+    assert len(first.new_ids) == 1
+    (box_id,) = first.new_ids
+    assert hausdorff(mapper[box_id].polyline, BOX_TRUTH) < 0.05
+    assert (mapper[box_id].status, mapper[box_id].hits, mapper[box_id].first_seen) == (
+        "new",
+        1,
+        5.0,
+    )
+    second = mapper.update(cast_scan(world, ORIGIN, stamp=6.0), ORIGIN)
+    assert second.new_ids == ()
+    assert (mapper[box_id].status, mapper[box_id].hits, mapper[box_id].last_seen) == (
+        "confirmed",
+        2,
+        6.0,
+    )
+
+
+def test_ids_are_never_reused():
+    params = MapperParams(miss_limit=1)
+    mapper = build(scene(BOX, WALL), params=params)
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    mapper.update(cast_scan(scene(WALL), ORIGIN), ORIGIN)
+    assert box_id not in mapper
+    report = mapper.update(cast_scan(scene(BOX, WALL), ORIGIN), ORIGIN)
+    (again,) = report.new_ids
+    assert again > max(box_id, *(entry.id for entry in mapper if entry.id != again))
+
+
+def test_association_only_leaves_the_map_unchanged():
+    params = MapperParams(miss_limit=1)
+    mapper = build(scene(BOX, WALL), params=params)
+    before = {entry.id: entry for entry in mapper}
+    rng = np.random.default_rng(1)
+    pose = jitter(rng)
+    report = mapper.update(
+        cast_scan(scene(WALL, box((1.0, -2.5), 0.3, 0.3)), pose, noise=0.01, rng=rng),
+        pose,
+        merge=False,
+    )
+    assert {entry.id: entry for entry in mapper} == before
+    assert len(report.associated) == 1
+    assert 0.0 < report.associated[0].distance < params.gate
+    assert report.missed_ids == (id_nearest(mapper, BOX_TRUTH),)
+    assert report.new_ids == report.deleted_ids == ()
+    assert len(report.unassociated) == 1
+
+
+def test_wall_seen_in_pieces_is_joined_when_seen_whole():
+    params = MapperParams(hausdorff_restriction="projection")
+    long_wall = wall((3.0, -2.0), (3.0, 2.0))
+    pillar = box((1.5, 0.0), 0.2, 0.2)
+    mapper = build(scene(long_wall, pillar), params=params)
+    assert len(mapper) == 3  # two wall pieces and the pillar
+    report = mapper.update(cast_scan(scene(long_wall), ORIGIN), ORIGIN)
+    ((absorbed, survivor),) = report.joined
+    assert survivor < absorbed  # the older id survives
+    assert absorbed not in mapper
+    assert id_nearest(mapper, long_wall[0]) == survivor
+    assert hausdorff(mapper[survivor].polyline, long_wall[0]) < 0.05
+    assert mapper[survivor].hits == 4 + 4  # both pieces, each seen again in this scan
+    assert len(mapper) == 2  # the wall and the (now blank) pillar
+
+
+def test_update_is_deterministic():
+    world = scene(BOX, WALL)
+    results = []
+    for _ in range(2):
+        rng = np.random.default_rng(9)
+        mapper = PolylineMap()
+        for k in range(20):
+            pose = jitter(rng)
+            mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=k), pose)
+        results.append({entry.id: entry.polyline.points.tolist() for entry in mapper})
+    assert results[0] == results[1]
+
+
+def test_timings_are_collected_per_stage():
+    timings: dict[str, float] = {}
+    PolylineMap().update(cast_scan(scene(BOX), ORIGIN), ORIGIN, timings=timings)
+    assert set(timings) == {"extract", "associate", "merge", "join", "life_cycle"}
+    assert all(value >= 0.0 for value in timings.values())
+
+
+def test_empty_scan_on_an_empty_map():
+    report = PolylineMap().update(cast_scan(scene(), ORIGIN), ORIGIN)
+    assert report.scan_polylines == report.associated == report.new_ids == ()
+
+
+def test_scan_with_no_return_misses_every_visible_object():
+    params = MapperParams(miss_limit=1)
+    mapper = build(scene(BOX, WALL), params=params)
+    report = mapper.update(cast_scan(scene(), ORIGIN), ORIGIN)
+    assert len(report.deleted_ids) == 2
+    assert len(mapper) == 0
+
+
+@pytest.mark.parametrize("name", sorted(NASTY_SCANS))
+def test_nasty_scans_go_through_update(name):
+    mapper = PolylineMap()
+    mapper.add([[1.0, 0.2], [1.0, 0.6]])
+    mapper.add([[1.5, -0.5]])
+    for merge in (False, True):
+        report = mapper.update(NASTY_SCANS[name], ORIGIN, merge=merge)
+        assert set(report.deleted_ids) <= {0, 1}
+    # nan readings tell nothing: they never make a polyline visible.
+    if name == "all_nan":
+        assert report.missed_ids == ()
+
+
+def test_map_polyline_validation():
+    with pytest.raises(ValueError, match="status"):
+        MapPolyline(0, [[0.0, 0.0]], status="gone")
+    with pytest.raises(ValueError, match="hits"):
+        MapPolyline(0, [[0.0, 0.0]], hits=-1)
+    mapper = PolylineMap()
+    mapper.restore(MapPolyline(7, [[0.0, 0.0], [1.0, 0.0]]), next_id=12)
+    assert mapper.next_id == 12
+    with pytest.raises(ValueError, match="already"):
+        mapper.restore(MapPolyline(7, [[0.0, 0.0]]))
+
+
+def test_expected_ranges_match_the_ray_caster():
+    rng = np.random.default_rng(4)
+    angles = np.linspace(-2.3, 2.3, 300)
+    for _ in range(20):
+        points = np.cumsum(rng.uniform(-1.0, 1.0, (4, 2)), axis=0) + rng.uniform(-3, 3, 2)
+        segments = np.stack((points[:-1], points[1:]), axis=1)
+        np.testing.assert_allclose(
+            expected_ranges(points, angles), raycast(segments, ORIGIN, angles), rtol=1e-9
+        )
+    assert np.isinf(expected_ranges(np.empty((0, 2)), angles)).all()
+    single = expected_ranges([[2.0, 0.0]], angles)
+    assert np.isfinite(single).sum() == 1
+
+
+def test_visibility_counts_in_view_unoccluded_and_seen_through_beams():
+    line = np.array([[2.0, -0.5], [2.0, 0.5]])
+    open_view = cast_scan(scene(wall((5.0, -3.0), (5.0, 3.0))), ORIGIN)
+    in_view, unoccluded, seen_through = visible_beams(line, open_view, ORIGIN)
+    assert in_view == unoccluded == seen_through > 50
+    assert should_be_visible(line, open_view, ORIGIN, MapperParams())
+    assert is_missing(line, open_view, ORIGIN, MapperParams())
+    in_place = cast_scan(scene(line), ORIGIN)
+    counts = visible_beams(line, in_place, ORIGIN)
+    assert counts.in_view == counts.unoccluded > 50
+    assert counts.seen_through == 0
+    assert should_be_visible(line, in_place, ORIGIN, MapperParams())
+    assert not is_missing(line, in_place, ORIGIN, MapperParams())
+    blocked = cast_scan(scene(wall((1.0, -0.2), (1.0, 0.2))), ORIGIN)
+    counts = visible_beams(line, blocked, ORIGIN)
+    assert 0 < counts.unoccluded < 0.5 * counts.in_view
+    assert not should_be_visible(line, blocked, ORIGIN, MapperParams())
+    assert not is_missing(line, blocked, ORIGIN, MapperParams())
+    assert tuple(visible_beams(line, open_view, ORIGIN, max_range=1.5)) == (0, 0, 0)
+    nan_scan = Scan(ranges=np.full(541, np.nan), angle_min=-2.356, angle_increment=0.00873)
+    assert visible_beams(line, nan_scan, ORIGIN).unoccluded == 0
+
+
+def test_object_still_in_place_is_not_missed_when_association_fails():
+    mapper = build(scene(BOX, WALL), params=MapperParams(miss_limit=1))
+    box_id = id_nearest(mapper, BOX_TRUTH)
+    # A gate no pair can pass: nothing is associated, but the box reads where it was.
+    mapper.params = MapperParams(miss_limit=1, gate=1e-6)
+    rng = np.random.default_rng(2)
+    for k in range(5):
+        report = mapper.update(cast_scan(scene(BOX, WALL), ORIGIN, noise=0.01, rng=rng), ORIGIN)
+        assert report.associated == ()
+        assert box_id not in report.missed_ids, k
+    assert mapper[box_id].status == "confirmed"
+
+
+def test_extend_ends_removes_the_beam_spacing_bias():
+    # A wall seen at grazing incidence: raw ends stop short by half a beam gap on average.
+    end = np.array([4.0, 1.0])
+    world = wall((1.0, 1.0), tuple(end))
+    rng = np.random.default_rng(8)
+    raw, extended = [], []
+    for _ in range(60):
+        pose = np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.1, 0.1), 0.0])
+        scan = cast_scan(world, pose)
+        (line,) = extract_polylines(scan)
+        raw.append(line.transformed(pose).points[0, 0] - end[0])
+        longer = extend_ends(line, scan.angle_increment).transformed(pose)
+        extended.append(longer.points[0, 0] - end[0])
+    assert np.mean(raw) < -0.015
+    assert abs(np.mean(extended)) < 0.005
+    assert extend_ends([[1.0, 1.0]], 0.01).points.tolist() == [[1.0, 1.0]]
+
+
+def drive_along_corridor(mapper, rng):
+    corridor = scene(
+        wall((-2.0, 1.5), (12.0, 1.5)), wall((-2.0, -1.5), (12.0, -1.5)), box((5.0, 1.0), 0.6, 0.4)
+    )
+    new_objects = 0
+    for k, x in enumerate(np.arange(0.0, 8.0, 0.2)):
+        pose = np.array([x, 0.05 * np.sin(x), 0.02 * np.cos(x)])
+        report = mapper.update(cast_scan(corridor, pose, noise=0.01, rng=rng, stamp=k), pose)
+        new_objects += len(report.new_ids)
+    return new_objects
+
+
+@pytest.mark.parametrize("mode", ["vertex", "projection"])
+def test_corridor_drive_keeps_one_polyline_per_object(mode):
+    mapper = PolylineMap(MapperParams(hausdorff_restriction=mode))
+    drive_along_corridor(mapper, np.random.default_rng(6))
+    walls = [entry for entry in mapper if entry.polyline.length > 5.0]
+    assert [round(entry.polyline.length) for entry in walls] == [14, 14]
+    # The box: one polyline for the faces seen on the way in, one for its back face seen
+    # on the way out (faces that only meet at a corner are not joined).
+    assert len(mapper) <= 4
+    assert all(entry.status == "confirmed" for entry in mapper)
+
+
+def test_joining_with_the_vertex_restriction_leaves_wall_fragments():
+    mapper = PolylineMap(MapperParams(hausdorff_restriction="vertex"), join_mode="vertex")
+    drive_along_corridor(mapper, np.random.default_rng(6))
+    assert len(mapper) > 10
+    with pytest.raises(ValueError, match="join_mode"):
+        PolylineMap(join_mode="segment")

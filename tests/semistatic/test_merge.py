@@ -1,0 +1,244 @@
+"""Merge and join (paper Sec. 3.4, DESIGN.md details 7-8)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from semistatic.hausdorff import hausdorff
+from semistatic.merge import (
+    END_TOLERANCE_FACTOR,
+    _project_lists,
+    _project_vectorised,
+    join,
+    merge,
+    overlaps,
+    project_onto,
+)
+from semistatic.polyline import Polyline
+from tests.semistatic.conftest import NASTY_POLYLINES
+
+EPSILON = 0.03
+GATE = 0.12
+WALL = np.array([[0.0, 0.0], [3.0, 0.0]])
+BOX = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.6]])  # two faces of a box
+
+
+def test_merging_an_identical_observation_changes_nothing():
+    for shape in (WALL, BOX):
+        merged = merge(shape, shape, EPSILON, map_weight=4.0)
+        np.testing.assert_allclose(merged.points, shape, atol=1e-12)
+
+
+def test_scan_that_reaches_farther_extends_the_map():
+    merged = merge(WALL, [[2.0, 0.0], [4.0, 0.0]], EPSILON)
+    np.testing.assert_allclose(merged.points, [[0.0, 0.0], [4.0, 0.0]], atol=1e-12)
+    merged = merge(WALL, [[-1.0, 0.0], [1.0, 0.0]], EPSILON)
+    np.testing.assert_allclose(merged.points, [[-1.0, 0.0], [3.0, 0.0]], atol=1e-12)
+
+
+def test_scan_that_sees_around_a_corner_adds_the_new_face():
+    merged = merge(BOX[:2], BOX, EPSILON)
+    np.testing.assert_allclose(merged.points, BOX, atol=1e-12)
+
+
+def test_partial_view_leaves_the_ends_alone():
+    merged = merge(BOX, [[0.3, 0.02], [0.7, 0.02]], EPSILON, map_weight=1.0)
+    np.testing.assert_allclose(merged.points[[0, -1]], BOX[[0, -1]])
+    assert len(merged) == 3
+
+
+def test_scan_direction_does_not_matter():
+    scan = np.array([[0.1, 0.02], [1.02, 0.01], [1.01, 0.7]])
+    forward = merge(BOX, scan, EPSILON, map_weight=2.0)
+    backward = merge(BOX, scan[::-1], EPSILON, map_weight=2.0)
+    np.testing.assert_allclose(forward.points, backward.points, atol=1e-12)
+    # The map's direction is kept.
+    assert forward.points[0, 0] < forward.points[-1, 1]
+
+
+@pytest.mark.parametrize("weight", [0.0, 1.0, 9.0])
+def test_map_moves_toward_the_scan_by_one_over_one_plus_weight(weight):
+    merged = merge(WALL, WALL + np.array([0.0, 0.02]), EPSILON, map_weight=weight)
+    np.testing.assert_allclose(merged.points[:, 1], 0.02 / (1.0 + weight), atol=1e-12)
+
+
+def test_ends_within_tolerance_are_averaged_in_both_directions():
+    # Alternate observations 4 cm too long and 4 cm too short: no ratchet either way.
+    line = Polyline(WALL)
+    for k in range(40):
+        end = 3.04 if k % 2 == 0 else 2.96
+        line = merge(line, [[0.0, 0.0], [end, 0.0]], EPSILON, map_weight=min(k + 1, 30))
+    assert line.points[-1, 0] == pytest.approx(3.0, abs=0.01)
+    assert END_TOLERANCE_FACTOR * EPSILON > 0.04
+
+
+def test_repeated_noisy_observations_converge_without_growing():
+    rng = np.random.default_rng(5)
+    line = Polyline(BOX)
+    for k in range(200):
+        dense = np.concatenate(
+            (np.linspace(BOX[0], BOX[1], 40), np.linspace(BOX[1], BOX[2], 25)[1:])
+        )
+        noisy = dense + rng.normal(0.0, 0.01, dense.shape)
+        keep = shapely.get_coordinates(
+            shapely.simplify(shapely.LineString(noisy), EPSILON, preserve_topology=False)
+        )
+        line = merge(line, keep, EPSILON, map_weight=min(k + 1, 30))
+        assert len(line) <= 2 * len(BOX)
+    assert hausdorff(line, BOX) < 0.02
+
+
+def test_merged_scan_indices_are_the_vertex_order():
+    merged = merge(Polyline(WALL, scan_indices=[7, 9]), [[2.0, 0.0], [4.0, 0.0]], EPSILON)
+    assert merged.scan_indices.tolist() == list(range(len(merged)))
+
+
+def test_degenerate_inputs():
+    empty = np.empty((0, 2))
+    assert merge(WALL, empty, EPSILON).points.tolist() == WALL.tolist()
+    line = Polyline(WALL)
+    assert merge(line, empty, EPSILON) is line
+    assert merge(empty, WALL, EPSILON).points.tolist() == WALL.tolist()
+    # One vertex: a point far beyond an end extends, a point near the middle does nothing.
+    assert merge(WALL, [[4.0, 0.0]], EPSILON).points.tolist() == [[0.0, 0.0], [4.0, 0.0]]
+    assert merge(WALL, [[1.5, 0.05]], EPSILON).points.tolist() == WALL.tolist()
+    # A one-vertex map polyline: the scan gives the shape, the point may extend it.
+    assert merge([[1.5, 0.0]], WALL, EPSILON).points.tolist() == WALL.tolist()
+    assert merge([[-1.0, 0.0]], WALL, EPSILON).points.tolist() == [[-1.0, 0.0], [3.0, 0.0]]
+    np.testing.assert_allclose(merge([[0.0, 0.0]], [[0.0, 0.2]], EPSILON).points, [[0.0, 0.1]])
+    # Two vertices each.
+    assert len(merge([[0.0, 0.0], [1.0, 0.0]], [[0.5, 0.01], [1.5, 0.01]], EPSILON)) == 2
+
+
+@pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
+def test_nasty_polylines_go_through_merge_and_join(name):
+    nasty = NASTY_POLYLINES[name]
+    for old, new in ((nasty, BOX), (BOX, nasty), (nasty, nasty)):
+        merged = merge(old, new, EPSILON)
+        assert np.all(np.isfinite(merged.points))
+    groups = join([nasty, BOX, nasty + 10.0], GATE, EPSILON)
+    assert sorted(k for _, members in groups for k in members) == [0, 1, 2]
+
+
+def test_invalid_arguments_are_rejected():
+    with pytest.raises(ValueError, match="epsilon"):
+        merge(WALL, WALL, 0.0)
+    with pytest.raises(ValueError, match="map_weight"):
+        merge(WALL, WALL, EPSILON, map_weight=-1.0)
+    with pytest.raises(ValueError, match="end_tolerance"):
+        merge(WALL, WALL, EPSILON, end_tolerance=-1.0)
+    with pytest.raises(ValueError, match="two distinct vertices"):
+        project_onto([[0.0, 0.0]], [[1.0, 1.0], [1.0, 1.0]])
+    with pytest.raises(ValueError, match="weights"):
+        join([WALL, WALL], GATE, EPSILON, weights=[1.0])
+
+
+def test_projection_matches_shapely_and_both_code_paths_agree():
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        vertices = np.cumsum(rng.uniform(-1.0, 1.0, (rng.integers(2, 8), 2)), axis=0)
+        points = rng.uniform(-3.0, 3.0, (rng.integers(1, 12), 2))
+        found = project_onto(points, vertices)
+        line = shapely.LineString(vertices)
+        for k, point in enumerate(points):
+            assert found.distance[k] == pytest.approx(line.distance(shapely.Point(point)))
+            assert found.arc[k] == pytest.approx(line.project(shapely.Point(point)), abs=1e-9)
+        small = _project_lists(points.tolist(), vertices.tolist())
+        large = _project_vectorised(points, vertices)
+        np.testing.assert_allclose(small[0], large.arc, atol=1e-12)
+        np.testing.assert_allclose(small[2], large.distance, atol=1e-12)
+        assert small[3] == large.before.tolist()
+        assert small[4] == large.after.tolist()
+
+
+def test_before_and_after_flags():
+    found = project_onto([[-1.0, 0.5], [4.0, 0.0], [1.0, 1.0], [3.0, 1.0], [0.0, 0.0]], WALL)
+    assert found.before.tolist() == [True, False, False, False, True]
+    assert found.after.tolist() == [False, True, False, True, False]
+
+
+def test_overlaps():
+    assert overlaps(WALL, [[2.0, 0.03], [4.0, 0.03]], GATE, mode="projection")
+    assert not overlaps(WALL, [[3.05, 0.0], [4.0, 0.0]], GATE, mode="projection")  # a gap
+    assert not overlaps(BOX[:2], BOX[1:], GATE)  # two faces meeting at a corner
+    assert not overlaps(WALL, WALL + np.array([0.0, 0.5]), GATE)  # parallel, too far
+    assert overlaps([[1.0, 0.05]], WALL, GATE, mode="projection")  # a point inside
+    # The vertex restriction cannot shorten a two-vertex wall to a point's neighbourhood.
+    assert not overlaps([[1.0, 0.05]], WALL, GATE, mode="vertex")
+    assert not overlaps([[4.0, 0.0]], WALL, GATE, mode="projection")
+    assert overlaps([[1.0, 0.0]], [[1.0, 0.05]], GATE)
+    assert not overlaps(np.empty((0, 2)), WALL, GATE)
+
+
+def test_join_merges_overlapping_pieces_and_keeps_the_rest():
+    piece = Polyline([[2.5, 0.02], [4.0, 0.02]])
+    far = Polyline([[0.0, 5.0], [1.0, 5.0]])
+    groups = join([WALL, far, piece], GATE, EPSILON, mode="projection")
+    assert [members for _, members in groups] == [(0, 2), (1,)]
+    joined, untouched = groups[0][0], groups[1][0]
+    assert untouched is far
+    assert joined.points[0, 0] == pytest.approx(0.0)
+    assert joined.points[-1, 0] == pytest.approx(4.0)
+
+
+def test_join_keeps_the_heavier_polyline_in_place():
+    shifted = WALL + np.array([0.0, 0.06])
+    light_first = join([shifted, WALL], GATE, EPSILON, weights=[1.0, 99.0])
+    np.testing.assert_allclose(light_first[0][0].points[:, 1], 0.0006, atol=1e-12)
+
+
+def test_join_only_tests_pairs_with_a_candidate():
+    duplicate = WALL + np.array([0.0, 0.01])
+    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[])) == 2
+    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[1])) == 1
+
+
+def test_join_chains_groups_and_handles_empty_input():
+    pieces = [[[0.0, 0.0], [1.2, 0.0]], [[1.0, 0.01], [2.2, 0.01]], [[2.0, 0.0], [3.0, 0.0]]]
+    groups = join(pieces, GATE, EPSILON, mode="projection")
+    assert len(groups) == 1
+    assert groups[0][1] == (0, 1, 2)
+    assert groups[0][0].length == pytest.approx(3.0, abs=0.01)
+    assert join([], GATE, EPSILON) == []
+
+
+# Centimetre grid: repeated, collinear and folded vertices come up often, and no
+# denormal lengths (which say nothing about the merge).
+coordinates = st.integers(min_value=-500, max_value=500).map(lambda value: value / 100.0)
+polylines = st.lists(st.tuples(coordinates, coordinates), min_size=0, max_size=6).map(
+    lambda rows: np.array(rows, dtype=float).reshape(-1, 2)
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(old=polylines, new=polylines, weight=st.floats(0.0, 50.0))
+def test_merge_always_gives_a_finite_polyline_no_longer_than_its_inputs(old, new, weight):
+    merged = merge(old, new, EPSILON, map_weight=weight)
+    assert np.all(np.isfinite(merged.points))
+    assert len(merged) <= len(old) + len(new)
+    if len(old) or len(new):
+        assert len(merged) >= 1
+    if len(new) == 0:
+        np.testing.assert_array_equal(merged.points, old)
+
+
+@settings(max_examples=60, deadline=None)
+@given(line=polylines)
+def test_merging_a_polyline_with_itself_keeps_its_simplified_shape(line):
+    merged = merge(line, line, EPSILON, map_weight=3.0)
+    if len(line) >= 2 and Polyline(line).length > 0.0:
+        assert hausdorff(merged, line) <= EPSILON + 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(lines=st.lists(polylines, max_size=5))
+def test_join_partitions_its_input(lines):
+    groups = join(lines, GATE, EPSILON, mode="projection")
+    members = sorted(k for _, group in groups for k in group)
+    assert members == list(range(len(lines)))
+    for line, _ in groups:
+        assert np.all(np.isfinite(line.points))
