@@ -25,7 +25,7 @@ test: lint
 	$(PY) -m pytest -q
 
 run: install
-	$(VENV)/bin/semistatic run sim1 --out $(OUT)/sim1
+	$(VENV)/bin/semistatic run sim1 --compare --out $(OUT)/sim1
 
 bench: install
 	$(PY) -m pytest -q -m bench benchmarks

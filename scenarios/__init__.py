@@ -1,1 +1,23 @@
-"""Experiments: scenario files, the closed-loop runner, metrics, figures and the CLI."""
+"""Experiments: scenario files, the closed-loop runner, metrics, figures, replay and the CLI.
+
+Examples
+--------
+>>> from scenarios import bundled_scenarios, load_scenario
+>>> bundled_scenarios()
+('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2')
+>>> load_scenario("pal3b").people
+('walker',)
+"""
+
+from scenarios.layout import lap_worlds, scenario_world, world_for_lap
+from scenarios.load import bundled_scenarios, load_scenario
+from scenarios.spec import ScenarioSpec
+
+__all__ = [
+    "ScenarioSpec",
+    "bundled_scenarios",
+    "lap_worlds",
+    "load_scenario",
+    "scenario_world",
+    "world_for_lap",
+]

@@ -9,6 +9,7 @@ True
 False
 """
 
+from worlds.checks import Clearances, LayoutProblem, layout_problems
 from worlds.errors import SpecError
 from worlds.load import bundled_worlds, load_world
 from worlds.spec import (
@@ -23,6 +24,8 @@ from worlds.spec import (
 
 __all__ = [
     "BoxSpec",
+    "Clearances",
+    "LayoutProblem",
     "PathSpec",
     "PersonSpec",
     "PostSpec",
@@ -31,5 +34,6 @@ __all__ = [
     "WallSpec",
     "WorldSpec",
     "bundled_worlds",
+    "layout_problems",
     "load_world",
 ]

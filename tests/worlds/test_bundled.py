@@ -1,22 +1,41 @@
 """Every bundled world is a usable testbench: the acceptance geometry of issue 3.
 
 The robot is a Pioneer 3-DX (base 0.455 m x 0.381 m, base_link at the wheel axle about the
-body centre). Geometry is checked with shapely every ``PATH_STEP`` metres along the path;
-a segment's field at arc length ``s`` is its robot-frame polygon moved to ``path.pose(s)``.
+body centre). The geometry comes from ``worlds.checks``: shapely every ``PATH_STEP`` metres
+along the path; a segment's field at arc length ``s`` is its robot-frame polygon moved to
+``path.pose(s)``. The last tests make sure those checks catch broken layouts.
 """
 
 from __future__ import annotations
 
-from functools import cache
+import dataclasses
 
 import numpy as np
 import pytest
 import shapely
 
 from robots.path import SplinePath
-from semistatic.frames import transform_points, wrap_angle
 from worlds import bundled_worlds, load_world
-from worlds.spec import PersonSpec, WorldSpec
+from worlds.checks import (
+    PIONEER_FOOTPRINT,
+    Clearances,
+    box_footprint_gaps,
+    box_protective_gaps,
+    box_warning_overlaps,
+    fields_along_path,
+    layout_problems,
+    overlapping_solids,
+    path_poses,
+    people_in_obstacles,
+    placed,
+    segment_indices,
+    spline_of,
+    static_in_warning,
+    swept_footprint,
+    visible_post_counts,
+    wall_footprint_gaps,
+)
+from worlds.spec import BoxSpec, PersonSpec, WallSpec, WorldSpec
 
 PATH_STEP = 0.05  # m between checked path poses
 PATH_LENGTH_RANGE = (9.0, 12.0)  # m, "approximately 9-12 m" (paper Sec. 6)
@@ -27,83 +46,16 @@ POST_RANGE = 15.0  # m
 FIELD_OF_VIEW = np.radians(270.0)
 PROTECTIVE_CLEARANCE = 0.05  # m between a box and any protective field
 FOOTPRINT_CLEARANCE = 0.10  # m between the swept robot footprint and boxes or walls
+MIN_WARNING_OVERLAP = 0.01  # m2 of a box inside one warning field
 
 FOOTPRINT = shapely.box(
     -FOOTPRINT_HALF_LENGTH, -FOOTPRINT_HALF_WIDTH, FOOTPRINT_HALF_LENGTH, FOOTPRINT_HALF_WIDTH
 )
 
 
-@cache
 def world_and_path(name: str) -> tuple[WorldSpec, SplinePath]:
     world = load_world(name)
-    return world, SplinePath(world.path.knots)
-
-
-def path_poses(path: SplinePath) -> np.ndarray:
-    return path.sample(PATH_STEP)[1]
-
-
-def placed(polygon: shapely.Polygon, pose: np.ndarray) -> shapely.Polygon:
-    """Return a robot-frame polygon moved to the world-frame ``pose``."""
-    return shapely.Polygon(transform_points(pose, np.asarray(polygon.exterior.coords)))
-
-
-def segment_indices(world: WorldSpec, path: SplinePath, s: np.ndarray) -> np.ndarray:
-    """Return the segment driven at each arc length ``s`` (the last one owns the end)."""
-    starts = np.array([path.knot_s[seg.start_knot] for seg in world.path.segments])
-    return np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(starts) - 1)
-
-
-@cache
-def fields_along_path(name: str) -> tuple[list[shapely.Polygon], list[shapely.Polygon]]:
-    """Return the warning and protective fields (world frame) at every checked pose."""
-    world, path = world_and_path(name)
-    s, poses = path.sample(PATH_STEP)
-    segments = [world.path.segments[i] for i in segment_indices(world, path, s)]
-    warning = [
-        placed(seg.warning_polygon(), pose) for seg, pose in zip(segments, poses, strict=True)
-    ]
-    protective = [
-        placed(seg.protective_polygon(), pose) for seg, pose in zip(segments, poses, strict=True)
-    ]
-    return warning, protective
-
-
-def wall_polygons(world: WorldSpec) -> list[shapely.Polygon]:
-    return [shapely.Polygon(wall.corners()) for wall in world.walls]
-
-
-def box_polygons(world: WorldSpec) -> list[shapely.Polygon]:
-    return [shapely.Polygon(box.corners()) for box in world.boxes]
-
-
-def post_discs(world: WorldSpec) -> list[shapely.Polygon]:
-    return [shapely.Point(post.xy).buffer(post.radius) for post in world.posts]
-
-
-def visible_post_counts(world: WorldSpec, poses: np.ndarray) -> np.ndarray:
-    """Return how many posts each pose sees: in range, in the field of view, unoccluded.
-
-    The line of sight from the pose to a post's centre must not cross a wall or a box.
-    """
-    posts = np.array([post.xy for post in world.posts])
-    offsets = posts[None, :, :] - poses[:, None, :2]
-    distance = np.linalg.norm(offsets, axis=2)
-    bearing = wrap_angle(np.arctan2(offsets[..., 1], offsets[..., 0]) - poses[:, 2:3])
-    candidate = (distance <= POST_RANGE) & (np.abs(bearing) <= FIELD_OF_VIEW / 2)
-    blockers = shapely.union_all(wall_polygons(world) + box_polygons(world))
-    shapely.prepare(blockers)
-    rows, cols = np.nonzero(candidate)
-    starts = poses[rows, :2]
-    sight = shapely.linestrings(np.stack([starts, posts[cols]], axis=1))
-    clear = ~shapely.intersects(blockers, sight)
-    counts = np.zeros(len(poses), dtype=int)
-    np.add.at(counts, rows[clear], 1)
-    return counts
-
-
-def swept_footprint(path: SplinePath) -> shapely.Geometry:
-    return shapely.union_all([placed(FOOTPRINT, pose) for pose in path_poses(path)])
+    return world, spline_of(world.path)
 
 
 @pytest.fixture(params=bundled_worlds())
@@ -149,64 +101,75 @@ def test_fields_suit_a_pioneer_3dx(name):
         assert np.abs(warning[:, 1]).max() <= 0.5
 
 
+def test_footprint_constant_is_the_pioneer_base():
+    assert shapely.Polygon(PIONEER_FOOTPRINT).equals(FOOTPRINT)
+
+
 def test_at_least_three_posts_visible_from_every_path_point(name):
-    world, path = world_and_path(name)
-    counts = visible_post_counts(world, path_poses(path))
+    world = load_world(name)
+    counts = visible_post_counts(
+        world, path_poses(world.path, PATH_STEP), post_range=POST_RANGE, field_of_view=FIELD_OF_VIEW
+    )
     assert counts.min() >= MIN_VISIBLE_POSTS, f"worst pose sees {counts.min()} posts"
 
 
 def test_every_box_enters_some_warning_field(name):
-    world, _ = world_and_path(name)
-    warning, _ = fields_along_path(name)
-    tree = shapely.STRtree(warning)
-    for box, polygon in zip(world.boxes, box_polygons(world), strict=True):
-        hits = tree.query(polygon, predicate="intersects")
-        assert hits.size > 0, f"box {box.name} never enters a warning field"
-        assert max(warning[i].intersection(polygon).area for i in hits) > 0.01
+    world = load_world(name)
+    warning, _ = fields_along_path(world.path, PATH_STEP)
+    overlaps = box_warning_overlaps(world, warning)
+    assert list(overlaps) == [box.name for box in world.boxes]
+    for box_name, area in overlaps.items():
+        assert area > MIN_WARNING_OVERLAP, f"box {box_name} never enters a warning field"
 
 
 def test_no_box_comes_near_a_protective_field(name):
-    world, _ = world_and_path(name)
-    _, protective = fields_along_path(name)
-    protective_union = shapely.union_all(protective)
-    for box, polygon in zip(world.boxes, box_polygons(world), strict=True):
-        gap = protective_union.distance(polygon)
-        assert gap >= PROTECTIVE_CLEARANCE, f"box {box.name} is {gap:.3f} m from a protective field"
+    world = load_world(name)
+    _, protective = fields_along_path(world.path, PATH_STEP)
+    gaps = box_protective_gaps(world, protective)
+    assert list(gaps) == [box.name for box in world.boxes]
+    for box_name, gap in gaps.items():
+        assert gap >= PROTECTIVE_CLEARANCE, f"box {box_name} is {gap:.3f} m from a protective field"
 
 
 def test_static_environment_stays_out_of_warning_fields(name):
-    world, _ = world_and_path(name)
-    warning, _ = fields_along_path(name)
-    static = shapely.union_all(wall_polygons(world) + post_discs(world))
-    assert not any(static.intersects(field) for field in warning)
+    world = load_world(name)
+    warning, _ = fields_along_path(world.path, PATH_STEP)
+    assert static_in_warning(world, warning) == []
 
 
 def test_robot_footprint_clears_boxes_and_walls(name):
-    world, path = world_and_path(name)
-    swept = swept_footprint(path)
-    for box, polygon in zip(world.boxes, box_polygons(world), strict=True):
-        assert swept.distance(polygon) >= FOOTPRINT_CLEARANCE, f"box {box.name}"
-    for index, polygon in enumerate(wall_polygons(world)):
-        assert swept.distance(polygon) >= FOOTPRINT_CLEARANCE, f"walls[{index}]"
+    world = load_world(name)
+    swept = swept_footprint(world.path, PIONEER_FOOTPRINT, PATH_STEP)
+    box_gaps = box_footprint_gaps(world, swept)
+    assert len(box_gaps) == len(world.boxes)
+    for box_name, gap in box_gaps.items():
+        assert gap >= FOOTPRINT_CLEARANCE, f"box {box_name}"
+    wall_gaps = wall_footprint_gaps(world, swept)
+    assert wall_gaps.shape == (len(world.walls),)
+    for index, gap in enumerate(wall_gaps):
+        assert gap >= FOOTPRINT_CLEARANCE, f"walls[{index}]"
 
 
 def test_boxes_and_posts_stand_free(name):
-    world, _ = world_and_path(name)
-    walls = shapely.union_all(wall_polygons(world))
-    solids = box_polygons(world) + post_discs(world)
-    for index, polygon in enumerate(solids):
-        assert walls.intersection(polygon).area == 0.0, f"solid {index} cuts a wall"
-        for other in solids[index + 1 :]:
-            assert polygon.intersection(other).area == 0.0
+    assert overlapping_solids(load_world(name)) == []
 
 
 def test_people_walk_in_free_space(name):
-    world, _ = world_and_path(name)
-    obstacles = shapely.union_all(wall_polygons(world) + box_polygons(world) + post_discs(world))
-    for person in world.people:
-        walk = shapely.LineString(person.waypoints) if len(person.waypoints) > 1 else None
-        body = (walk or shapely.Point(person.waypoints[0])).buffer(person.radius)
-        assert not body.intersects(obstacles), f"person {person.name} walks into an obstacle"
+    assert people_in_obstacles(load_world(name)) == {}
+
+
+def test_layout_has_no_problems_with_the_test_limits(name):
+    limits = Clearances(
+        protective=PROTECTIVE_CLEARANCE,
+        footprint=FOOTPRINT_CLEARANCE,
+        min_warning_overlap=MIN_WARNING_OVERLAP,
+        min_visible_posts=MIN_VISIBLE_POSTS,
+        post_range=POST_RANGE,
+        field_of_view=float(FIELD_OF_VIEW),
+        path_step=PATH_STEP,
+    )
+    assert Clearances() == limits  # the library defaults are the acceptance numbers
+    assert layout_problems(load_world(name), footprint=PIONEER_FOOTPRINT, clearances=limits) == []
 
 
 def walker_position(person: PersonSpec, t: float) -> np.ndarray:
@@ -233,7 +196,7 @@ def test_pal3_walker_crosses_in_front_of_the_robot_and_leaves():
     for t in np.arange(0.0, 12.0, 0.02):
         s = min(world.path.speed * t, path.length)
         pose = path.pose(s)
-        segment = world.path.segments[int(segment_indices(world, path, np.array([s]))[0])]
+        segment = world.path.segments[int(segment_indices(world.path, np.array([s]))[0])]
         body = shapely.Point(walker_position(walker, t)).buffer(walker.radius)
         gaps.append(placed(FOOTPRINT, pose).distance(body))
         in_warning |= placed(segment.warning_polygon(), pose).intersects(body)
@@ -241,3 +204,82 @@ def test_pal3_walker_crosses_in_front_of_the_robot_and_leaves():
     assert min(gaps) > 0.3
     path_line = shapely.LineString(path.point(np.linspace(0.0, path.length, 200)))
     assert path_line.distance(shapely.Point(walker.waypoints[-1])) > 2.0
+
+
+def with_box(world: WorldSpec, index: int, **changes) -> WorldSpec:
+    boxes = list(world.boxes)
+    boxes[index] = dataclasses.replace(boxes[index], **changes)
+    return dataclasses.replace(world, boxes=tuple(boxes))
+
+
+def broken_layouts() -> dict[str, tuple[WorldSpec, set[tuple[str, str, tuple[str, ...]]]]]:
+    """Return worlds that each break some checks, with the (check, subject, boxes) expected."""
+    sim1, pal3 = load_world("sim1"), load_world("pal3")
+    aisle = "box 'carton_aisle'"
+    return {
+        "box on the path": (
+            with_box(sim1, 0, pose=(3.0, -0.3, 0.0)),
+            {
+                ("protective", aisle, ("carton_aisle",)),
+                ("footprint", aisle, ("carton_aisle",)),
+            },
+        ),
+        "box against the wall": (
+            with_box(sim1, 0, pose=(3.0, -1.15, 0.0)),
+            {("warning", aisle, ("carton_aisle",))},
+        ),
+        "box in the wall": (
+            with_box(sim1, 0, pose=(3.0, -1.3, 0.0)),
+            {
+                ("warning", aisle, ("carton_aisle",)),
+                ("solids", aisle, ("carton_aisle",)),
+            },
+        ),
+        "two posts left": (
+            dataclasses.replace(sim1, posts=sim1.posts[:2]),
+            {("posts", "path", ())},
+        ),
+        "wall stub on the aisle": (
+            dataclasses.replace(sim1, walls=(*sim1.walls, WallSpec((4.5, -0.2), (4.5, 0.2)))),
+            {("static", "walls[5]", ()), ("footprint", "walls[5]", ()), ("posts", "path", ())},
+        ),
+        "box in the walker's way": (
+            dataclasses.replace(
+                pal3, boxes=(*pal3.boxes, BoxSpec("crate", (0.4, 0.4, 0.5), (2.5, -0.7, 0.0)))
+            ),
+            {
+                ("people", "person 'walker'", ("crate",)),
+                ("warning", "box 'crate'", ("crate",)),
+            },
+        ),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(broken_layouts()))
+def test_layout_problems_name_each_broken_check(case):
+    world, expected = broken_layouts()[case]
+    problems = layout_problems(world)
+    assert {(p.check, p.subject, p.boxes) for p in problems} == expected
+    assert all(str(p).startswith(f"{p.subject}: ") for p in problems)
+
+
+def test_a_box_hiding_posts_is_blamed():
+    world = load_world("sim1")
+    # Near the end of the path the robot sees 4 posts; a long crate before the north wall
+    # hides the two posts on it.
+    crate = BoxSpec("crate", (2.4, 0.3, 1.0), (7.5, 6.0, 0.0))
+    hidden = dataclasses.replace(world, boxes=(crate,))
+    problems = [p for p in layout_problems(hidden) if p.check == "posts"]
+    assert problems
+    assert problems[0].boxes == ("crate",)
+    assert "see fewer than 3 posts" in problems[0].message
+
+
+def test_clearances_change_the_verdict():
+    world = load_world("sim1")
+    _, protective = fields_along_path(world.path, PATH_STEP)
+    closest = min(box_protective_gaps(world, protective).values())
+    strict = Clearances(protective=closest + 0.01)
+    assert [p.check for p in layout_problems(world, clearances=strict)] == ["protective"]
+    wide_robot = np.array(PIONEER_FOOTPRINT) * [1.0, 2.0]
+    assert {p.check for p in layout_problems(world, footprint=wide_robot)} == {"footprint"}

@@ -1,0 +1,202 @@
+"""Numbers from a run: Table 1, detection against ground truth, localization, safety, speed.
+
+Pure functions on arrays and small dicts, so each one is tested on hand-made input.
+
+Examples
+--------
+>>> table1_cm({"a/0": [0.02, 0.04], "a/1": [0.01, 0.01, 0.01]}, min_samples=2)
+{'mean': {'avg': 2.0, 'min': 1.0, 'max': 3.0}, 'std': {'avg': 0.5, 'min': 0.0, 'max': 1.0}, \
+'polylines': 2}
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike
+
+from semistatic.frames import wrap_angle
+
+__all__ = [
+    "MATCH_DISTANCE",
+    "MIN_TABLE1_SAMPLES",
+    "PERSON_DISTANCE",
+    "detection_scores",
+    "localization_metrics",
+    "match_polylines_to_boxes",
+    "score_lap",
+    "table1_cm",
+]
+
+MATCH_DISTANCE = 0.10
+"""A map polyline is a box's when every point of it lies within this (m) of the box outline."""
+
+PERSON_DISTANCE = 0.35
+"""A false polyline this close (m) to where a person walked is counted as made of a person."""
+
+MIN_TABLE1_SAMPLES = 5
+"""Reference polylines associated fewer times than this are left out of Table 1."""
+
+DENSIFY_STEP = 0.02
+"""Metres between points when a polyline is compared with an outline as a curve."""
+
+
+def _densified(points: np.ndarray) -> np.ndarray:
+    line = shapely.LineString(points) if len(points) > 1 else shapely.Point(points[0])
+    return shapely.get_coordinates(shapely.segmentize(line, DENSIFY_STEP))
+
+
+def match_polylines_to_boxes(
+    polylines: Sequence[ArrayLike],
+    outlines: Mapping[str, ArrayLike],
+    tolerance: float = MATCH_DISTANCE,
+) -> np.ndarray:
+    """Return ``(n_polylines, n_boxes)``: whether each polyline lies on each box outline.
+
+    A polyline lies on a box when its farthest point (as a curve) is within ``tolerance``
+    of the box's boundary: a face or a corner of the box, not a wall beside it.
+
+    Examples
+    --------
+    >>> box = {"b": [[0, 0], [1, 0], [1, 1], [0, 1]]}
+    >>> match_polylines_to_boxes([[[0.2, -0.01], [0.8, 0.02]], [[3, 3], [4, 4]]], box)
+    array([[ True],
+           [False]])
+    """
+    rings = [
+        shapely.LinearRing(np.asarray(outline, dtype=float)) for outline in outlines.values()
+    ]
+    result = np.zeros((len(polylines), len(rings)), dtype=bool)
+    for i, polyline in enumerate(polylines):
+        pts = np.asarray(polyline, dtype=float).reshape(-1, 2)
+        if len(pts) == 0:
+            continue
+        probes = shapely.points(_densified(pts))
+        for j, ring in enumerate(rings):
+            result[i, j] = shapely.distance(ring, probes).max() <= tolerance
+    return result
+
+
+def detection_scores(true_positives: int, false_positives: int, false_negatives: int) -> dict:
+    """Return precision, recall and F1 (1.0 where nothing was expected and nothing found).
+
+    Examples
+    --------
+    >>> detection_scores(3, 1, 0)
+    {'tp': 3, 'fp': 1, 'fn': 0, 'precision': 0.75, 'recall': 1.0, 'f1': 0.857143}
+    """
+    found = true_positives + false_positives
+    expected = true_positives + false_negatives
+    precision = true_positives / found if found else 1.0
+    recall = true_positives / expected if expected else 1.0
+    f1 = 2 * precision * recall / (precision + recall) if precision + recall else 0.0
+    return {
+        "tp": int(true_positives),
+        "fp": int(false_positives),
+        "fn": int(false_negatives),
+        "precision": round(precision, 6),
+        "recall": round(recall, 6),
+        "f1": round(f1, 6),
+    }
+
+
+def score_lap(
+    local_maps: Mapping[str, Any],
+    segments: Sequence[Any],
+    truth: Mapping[str, np.ndarray],
+    person_track: Sequence[ArrayLike] = (),
+) -> tuple[dict, int]:
+    """Score the local maps at the end of a lap against the true boxes.
+
+    A box is *expected* in a segment's map when its outline meets the segment's safety
+    area. A map polyline is a true positive when it lies on some box, else a false
+    positive; an expected box with no polyline on it is a false negative. Returns the
+    scores and how many false polylines lie where a person walked this lap.
+    """
+    names = list(truth)
+    boxes = {name: shapely.Polygon(np.asarray(truth[name], dtype=float)) for name in names}
+    track = (
+        shapely.multipoints(np.asarray(person_track, dtype=float).reshape(-1, 2))
+        if len(person_track)
+        else None
+    )
+    tp = fp = fn = from_people = 0
+    for segment in segments:
+        lines = [line.points for line in local_maps[segment.name].world_polylines().values()]
+        matches = match_polylines_to_boxes(lines, truth) if names else np.zeros((len(lines), 0))
+        on_box = matches.any(axis=1)
+        tp += int(on_box.sum())
+        fp += int((~on_box).sum())
+        expected = [
+            j for j, name in enumerate(names) if boxes[name].intersects(segment.safety_area_world)
+        ]
+        fn += sum(1 for j in expected if not matches[:, j].any())
+        if track is not None:
+            for line, matched in zip(lines, on_box, strict=True):
+                geometry = shapely.LineString(line) if len(line) > 1 else shapely.Point(line[0])
+                if not matched and shapely.distance(geometry, track) <= PERSON_DISTANCE:
+                    from_people += 1
+    return detection_scores(tp, fp, fn), from_people
+
+
+def table1_cm(
+    distances: Mapping[str, Sequence[float]], min_samples: int = MIN_TABLE1_SAMPLES
+) -> dict:
+    """Return the paper's Table 1 (cm) from each reference polyline's distances (m).
+
+    For each reference polyline with at least ``min_samples`` associations: the mean and
+    standard deviation of its restricted Hausdorff distances; then the average, minimum
+    and maximum of those means and of those deviations.
+    """
+    means, stds = [], []
+    for values in distances.values():
+        values = np.asarray(values, dtype=float)
+        if len(values) >= min_samples:
+            means.append(values.mean() * 100.0)
+            stds.append(values.std() * 100.0)
+
+    def summary(numbers: list[float]) -> dict:
+        if not numbers:
+            return {"avg": None, "min": None, "max": None}
+        return {
+            "avg": round(float(np.mean(numbers)), 4),
+            "min": round(float(np.min(numbers)), 4),
+            "max": round(float(np.max(numbers)), 4),
+        }
+
+    return {"mean": summary(means), "std": summary(stds), "polylines": len(means)}
+
+
+def localization_metrics(
+    true_poses: ArrayLike, estimated_poses: ArrayLike, covariances: ArrayLike
+) -> dict:
+    """Return RMSE of position and heading, the largest position sigma and the mean NEES.
+
+    Examples
+    --------
+    >>> truth = np.zeros((2, 3))
+    >>> estimate = np.array([[0.03, 0.04, 0.0], [0.0, 0.0, 0.01]])
+    >>> cov = np.array([np.diag([1e-3, 1e-3, 1e-4])] * 2)
+    >>> localization_metrics(truth, estimate, cov)
+    {'rmse_xy_m': 0.035355, 'rmse_theta_rad': 0.007071, 'max_sigma_xy_m': 0.031623, \
+'nees_mean': 1.75}
+    """
+    truth = np.asarray(true_poses, dtype=float).reshape(-1, 3)
+    estimate = np.asarray(estimated_poses, dtype=float).reshape(-1, 3)
+    cov = np.asarray(covariances, dtype=float).reshape(-1, 3, 3)
+    if len(truth) == 0:
+        return {"rmse_xy_m": None, "rmse_theta_rad": None, "max_sigma_xy_m": None,
+                "nees_mean": None}
+    error = estimate - truth
+    error[:, 2] = wrap_angle(error[:, 2])
+    nees = np.einsum("ni,nij,nj->n", error, np.linalg.inv(cov), error)
+    sigma_xy = np.sqrt(np.linalg.eigvalsh(cov[:, :2, :2]).max(axis=1))
+    return {
+        "rmse_xy_m": round(float(np.sqrt((error[:, :2] ** 2).sum(axis=1).mean())), 6),
+        "rmse_theta_rad": round(float(np.sqrt((error[:, 2] ** 2).mean())), 6),
+        "max_sigma_xy_m": round(float(sigma_xy.max()), 6),
+        "nees_mean": round(float(nees.mean()), 4),
+    }

@@ -1,0 +1,265 @@
+"""Turn a run log into the output directory of DESIGN.md (a contract, extend only).
+
+::
+
+    DIR/metrics.json          machine-readable results
+    DIR/table1.csv            the Table 1 row of this run, in cm
+    DIR/maps/lap_NN.geojson   the local maps after lap NN, world frame
+    DIR/figures/*.png         Fig. 4 map, Fig. 5 EKF corrections, Fig. 2 tangent histograms, ...
+
+Nothing is half-written: every file is first written to a staging folder beside ``DIR``
+and moved in only when all of them exist.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scenarios.figures import (
+    plot_detection_scores,
+    plot_ekf_corrections,
+    plot_lap_times,
+    plot_polygonal_map,
+    plot_tangent_histograms,
+)
+from scenarios.metrics import detection_scores, localization_metrics, table1_cm
+from scenarios.runner import RunLog
+
+__all__ = [
+    "PAPER_TABLE1",
+    "TABLE1_COLUMNS",
+    "csv_text",
+    "json_text",
+    "policy_comparison",
+    "stage_and_publish",
+    "summarize",
+    "table1_rows",
+    "write_outputs",
+]
+
+TABLE1_COLUMNS = ("environment", "mean_avg", "mean_min", "mean_max", "std_avg", "std_min",
+                  "std_max")
+
+PAPER_TABLE1 = {
+    "sim1": (4.71, 2.19, 6.62, 1.89, 1.25, 2.69),
+    "sim2": (4.46, 1.20, 12.37, 2.13, 0.91, 5.14),
+    "pal1": (2.46, 1.78, 2.86, 1.09, 0.99, 1.16),
+    "pal3a": (3.99, 2.14, 5.94, 1.68, 0.70, 3.18),
+    "pal3b": (4.55, 2.88, 6.86, 1.72, 1.21, 3.45),
+}
+"""The paper's Table 1 (cm): mean avg/min/max, std avg/min/max per environment."""
+
+
+def _median_ms(seconds: list[float]) -> float | None:
+    return round(float(np.median(seconds)) * 1e3, 4) if seconds else None
+
+
+def summarize(log: RunLog) -> dict[str, Any]:
+    """Return the ``metrics.json`` content of a run (DESIGN.md keys, and more)."""
+    spec = log.spec
+    laps = log.laps
+    totals = [lap.detection for lap in laps]
+    overall = detection_scores(
+        sum(d["tp"] for d in totals), sum(d["fp"] for d in totals), sum(d["fn"] for d in totals)
+    )
+    latencies = {
+        f"lap_{lap.lap:02d}/{name}": value for lap in laps for name, value in lap.latencies.items()
+    }
+    localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)
+    wall, engine = log.wall_time_s, log.engine_time_s
+    return {
+        "scenario": spec.name,
+        "seed": spec.seed,
+        "laps": spec.laps,
+        "world": log.world.name,
+        "robot": log.robot.name,
+        "policy": spec.policy,
+        "table1_cm": table1_cm(log.table1_distances),
+        "detection": {
+            "precision": overall["precision"],
+            "recall": overall["recall"],
+            "f1": overall["f1"],
+            "false_objects_from_people": sum(lap.false_objects_from_people for lap in laps),
+            "per_lap": [{"lap": lap.lap, **lap.detection} for lap in laps],
+            "latency_scans": latencies,
+        },
+        "localization": localization,
+        "safety": {
+            "collisions": sum(lap.collisions for lap in laps),
+            "stops": sum(lap.stops for lap in laps),
+            "slowdowns": sum(lap.slowdowns for lap in laps),
+            "stops_per_lap": [lap.stops for lap in laps],
+            "lap_time_s": [round(lap.duration_s, 4) for lap in laps],
+            "total_time_s": round(sum(lap.duration_s for lap in laps), 4),
+            "stopped_time_s": [round(lap.stopped_time_s, 4) for lap in laps],
+            "slowed_time_s": [round(lap.slowed_time_s, 4) for lap in laps],
+            "laps_completed": sum(lap.completed for lap in laps),
+        },
+        "performance": {
+            "sim_time_s": round(log.sim_time_s, 3),
+            "wall_time_s": round(wall, 3),
+            "engine_time_s": round(engine, 3),
+            "real_time_factor": round(log.sim_time_s / wall, 3) if wall else None,
+            "wall_over_engine": round(wall / engine, 3) if engine else None,
+            "mapper_ms_median": _median_ms(log.mapper_seconds),
+            "raycast_ms_median": _median_ms(log.raycast_seconds),
+            "safety_scans": len(log.mapper_seconds),
+        },
+    }
+
+
+def policy_comparison(conservative: Mapping[str, Any], adaptive: Mapping[str, Any]) -> dict:
+    """Return lap times, stops and the time saved by the adaptive policy (two summaries)."""
+    base = conservative["safety"]["total_time_s"]
+    new = adaptive["safety"]["total_time_s"]
+    return {
+        policy: {
+            key: summary["safety"][key]
+            for key in ("lap_time_s", "stops", "slowdowns", "stops_per_lap")
+        }
+        for policy, summary in (("conservative", conservative), ("adaptive", adaptive))
+    } | {
+        "total_time_saved_s": round(base - new, 4),
+        "total_time_saved_percent": round(100.0 * (base - new) / base, 3) if base else None,
+    }
+
+
+def table1_rows(name: str, table: Mapping[str, Any]) -> list[list[Any]]:
+    """Return the CSV rows (header first) of one run's Table 1 (cm)."""
+    row = [name]
+    for stat in ("mean", "std"):
+        row += [table[stat][key] for key in ("avg", "min", "max")]
+    return [list(TABLE1_COLUMNS), row]
+
+
+def csv_text(rows: list[list[Any]]) -> str:
+    """Return ``rows`` as CSV text (``None`` as an empty cell)."""
+    buffer = io.StringIO()
+    cleaned = [["" if value is None else value for value in row] for row in rows]
+    csv.writer(buffer, lineterminator="\n").writerows(cleaned)
+    return buffer.getvalue()
+
+
+def _map_collection(maps: Mapping[str, dict]) -> dict:
+    features = [feature for collection in maps.values() for feature in collection["features"]]
+    segments = {name: collection["properties"] for name, collection in maps.items()}
+    return {"type": "FeatureCollection", "properties": {"segments": segments},
+            "features": features}
+
+
+def json_text(data: Any) -> str:
+    """Return ``data`` as indented JSON text (NaN refused: it is not JSON)."""
+    return json.dumps(data, indent=2, allow_nan=False) + "\n"
+
+
+def _figures(log: RunLog, staging: Path) -> None:
+    folder = staging / "figures"
+    folder.mkdir()
+    name = log.spec.name
+    final = log.maps_after_lap[-1] if log.maps_after_lap else {}
+    polylines = [
+        {"points": np.asarray(f["geometry"]["coordinates"], dtype=float).reshape(-1, 2),
+         **{k: f["properties"][k] for k in ("segment", "status", "id")}}
+        for collection in final.values()
+        for f in collection["features"]
+        if f["geometry"] is not None
+    ]
+    truth = log.truth_after_lap[-1] if log.truth_after_lap else None
+    plot_polygonal_map(
+        log.world, polylines, folder / "polygonal_map.png", truth_outlines=truth,
+        trajectory=np.asarray(log.true_poses).reshape(-1, 3),
+        estimate=np.asarray(log.estimated_poses).reshape(-1, 3),
+        title=f"{name}: semi-static local maps after lap {len(log.laps)} (paper Fig. 4)",
+    )
+    history = log.ekf_history
+    if len(history.get("stamp", ())):
+        plot_ekf_corrections(
+            history["stamp"], history["correction"], history["sigma"],
+            folder / "ekf_corrections.png", title=f"{name}: EKF corrections (paper Fig. 5)",
+        )
+    if log.example_pair is not None:
+        plot_tangent_histograms(
+            *log.example_pair, folder / "tangent_histograms.png",
+            title=f"{name}: an associated pair, reference (top) and scan (paper Fig. 2)",
+        )
+    plot_detection_scores(
+        [{"lap": lap.lap, **lap.detection} for lap in log.laps],
+        folder / "detection_scores.png", title=f"{name}: semi-static object detection",
+    )
+
+
+def write_outputs(
+    log: RunLog,
+    out_dir: str | os.PathLike[str],
+    *,
+    figures: bool = True,
+    comparison: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Write the run's output directory and return the metrics written.
+
+    ``comparison`` is the other policy's summary on the same scenario and seed; it adds
+    ``policy_comparison`` to the metrics and ``figures/lap_times.png``.
+    """
+    metrics = summarize(log)
+    if comparison is not None:
+        other = comparison
+        pair = (metrics, other) if log.spec.policy == "conservative" else (other, metrics)
+        metrics["policy_comparison"] = policy_comparison(*pair)
+
+    def fill(staging: Path) -> None:
+        (staging / "metrics.json").write_text(json_text(metrics))
+        rows = table1_rows(log.spec.name, metrics["table1_cm"])
+        (staging / "table1.csv").write_text(csv_text(rows))
+        (staging / "maps").mkdir()
+        for lap, maps in enumerate(log.maps_after_lap, start=1):
+            (staging / "maps" / f"lap_{lap:02d}.geojson").write_text(
+                json_text(_map_collection(maps))
+            )
+        if figures:
+            _figures(log, staging)
+            if comparison is not None:
+                times = metrics["policy_comparison"]
+                plot_lap_times(
+                    {p: times[p]["lap_time_s"] for p in ("conservative", "adaptive")},
+                    staging / "figures" / "lap_times.png",
+                    stops={p: times[p]["stops_per_lap"] for p in ("conservative", "adaptive")},
+                    title=f"{log.spec.name}: lap times by field policy (same seed)",
+                )
+
+    stage_and_publish(Path(out_dir), fill)
+    return metrics
+
+
+def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
+    """Let ``fill`` write into a staging folder beside ``out``, then move it all into ``out``.
+
+    If ``fill`` raises, nothing reaches ``out``. Files already in ``out`` are replaced.
+    """
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        fill(staging)
+        _move_into(staging, out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _move_into(staging: Path, out: Path) -> None:
+    """Move every staged file into ``out`` (created if missing), replacing old ones."""
+    for source in sorted(staging.rglob("*")):
+        target = out / source.relative_to(staging)
+        if source.is_dir():
+            target.mkdir(parents=True, exist_ok=True)
+        else:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(source, target)

@@ -1,0 +1,134 @@
+"""What a scenario file describes, as frozen dataclasses (no I/O, no simulator).
+
+A scenario is one experiment: a world, a robot preset, how many laps, the seed, the sensor
+rates and noise, the box moves between laps, which people walk, the mapper thresholds
+and the safety-field policy. ``scenarios.load`` builds these from TOML with the same
+validation layer as the worlds (unknown keys rejected with a suggestion, file and key
+named in every error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from semistatic.params import MapperParams
+from worlds.errors import MEMORY, SpecError
+from worlds.validation import bounds
+
+__all__ = [
+    "BOX_ACTIONS",
+    "POLICIES",
+    "BoxMove",
+    "Noise",
+    "Rates",
+    "SafetySettings",
+    "ScenarioSpec",
+]
+
+POLICIES = ("conservative", "adaptive")
+BOX_ACTIONS = ("move", "add", "remove")
+
+
+@dataclass(frozen=True)
+class Rates:
+    """Update rates in Hz. Physics steps at ``physics_hz``; everything else is scheduled on it.
+
+    The defaults follow DESIGN.md: 240 Hz physics, 50 Hz control, a 25 Hz localization laser
+    (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300, 80 ms scan time). With the
+    ``pioneer3dx`` preset one LMS100 serves both roles; each role then uses its own rate.
+    """
+
+    physics_hz: float = field(default=240.0, metadata=bounds(ge=60.0, le=2000.0))
+    control_hz: float = field(default=50.0, metadata=bounds(gt=0.0, le=500.0))
+    localization_hz: float = field(default=25.0, metadata=bounds(gt=0.0, le=100.0))
+    safety_hz: float = field(default=12.5, metadata=bounds(gt=0.0, le=100.0))
+
+    def __post_init__(self) -> None:
+        for name in ("control_hz", "localization_hz", "safety_hz"):
+            if getattr(self, name) > self.physics_hz:
+                raise SpecError(
+                    MEMORY, name, f"must not exceed physics_hz ({self.physics_hz:g} Hz)"
+                )
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values)."""
+
+    odometry: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+    range: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """The safety supervisor and the field policy.
+
+    ``slowdown`` is the speed factor while the warning field is occupied; the protective
+    field stops the robot. ``release_delay`` (s) keeps the reaction after the field clears.
+    ``min_points`` readings must fall in a field before it counts (one noisy beam is
+    ignored). Under the ``adaptive`` policy, readings within ``adaptive_margin`` (m) of a
+    known semi-static object of the current segment no longer count, except inside the
+    ``min_protective_depth`` (m) nearest part of the protective field, which is never given
+    up.
+    """
+
+    slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
+    release_delay: float = field(default=0.5, metadata=bounds(ge=0.0, le=10.0))
+    min_points: int = field(default=3, metadata=bounds(ge=1, le=100))
+    adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
+    min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
+
+
+@dataclass(frozen=True)
+class BoxMove:
+    """A change to the semi-static boxes before lap ``lap`` starts (laps count from 1).
+
+    ``action`` is ``move`` (needs ``pose``), ``add`` (needs ``pose`` and ``size``) or
+    ``remove``. Moves happen while the robot is back at the start, i.e. not observing.
+    """
+
+    lap: int = field(metadata=bounds(ge=2))
+    action: str
+    box: str
+    pose: tuple[float, float, float] | None = None
+    size: tuple[float, float, float] | None = field(default=None, metadata=bounds(gt=0.0))
+
+    def __post_init__(self) -> None:
+        if self.action not in BOX_ACTIONS:
+            raise SpecError(MEMORY, "action", f"must be one of {', '.join(BOX_ACTIONS)}")
+        if self.action in ("move", "add") and self.pose is None:
+            raise SpecError(MEMORY, "pose", f"'{self.action}' needs pose = [x, y, yaw]")
+        if self.action == "add" and self.size is None:
+            raise SpecError(MEMORY, "size", "'add' needs size = [sx, sy, sz]")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """One experiment. ``world`` is a bundled world name or a path (relative to the file)."""
+
+    name: str
+    world: str
+    robot: str = "pioneer3dx"
+    laps: int = field(default=5, metadata=bounds(ge=1, le=1000))
+    seed: int = field(default=0, metadata=bounds(ge=0))
+    policy: str = "conservative"
+    description: str = ""
+    people: tuple[str, ...] = ()
+    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0))
+    rates: Rates = field(default_factory=Rates)
+    noise: Noise = field(default_factory=Noise)
+    safety: SafetySettings = field(default_factory=SafetySettings)
+    mapper: MapperParams = field(default_factory=MapperParams)
+    moves: tuple[BoxMove, ...] = ()
+    source: str = MEMORY
+
+    def __post_init__(self) -> None:
+        if self.policy not in POLICIES:
+            raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")
+        for index, move in enumerate(self.moves):
+            if move.lap > self.laps:
+                raise SpecError(
+                    MEMORY,
+                    f"moves[{index}].lap",
+                    f"lap {move.lap} never runs with laps = {self.laps}",
+                )

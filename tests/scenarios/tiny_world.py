@@ -1,0 +1,55 @@
+"""A tiny world and scenario for fast closed-loop tests: a 3.5 m path, one box."""
+
+from pathlib import Path
+
+TINY_WORLD = """
+name = "tiny"
+description = "3.5 m corridor with one carton reaching into the warning field"
+# The end walls stand 2.5 m beyond the path so the swept warning field never reaches them.
+walls = [
+    { start = [-2.5, -1.2], end = [6.5, -1.2] },
+    { start = [-2.5, 1.2], end = [6.5, 1.2] },
+    { start = [-2.5, -1.2], end = [-2.5, 1.2] },
+    { start = [6.5, -1.2], end = [6.5, 1.2] },
+]
+# Posts on both sides and at both ends: a geometry that does not favour one direction.
+posts = [
+    { x = -2.0, y = -1.09 }, { x = 0.0, y = -1.09 }, { x = 2.0, y = -1.09 },
+    { x = 4.0, y = -1.09 }, { x = 6.0, y = -1.09 },
+    { x = -1.0, y = 1.09 }, { x = 1.0, y = 1.09 }, { x = 3.0, y = 1.09 }, { x = 5.0, y = 1.09 },
+    { x = -2.39, y = 0.3 }, { x = 6.39, y = -0.3 },
+]
+
+[path]
+speed = 0.4
+knots = [[0.0, 0.0], [1.75, 0.0], [3.5, 0.0]]
+
+[[path.segments]]
+name = "corridor"
+start_knot = 0
+end_knot = 2
+warning = [[0.25, -0.5], [1.4, -0.5], [1.4, 0.5], [0.25, 0.5]]
+protective = [[0.25, -0.3], [0.6, -0.3], [0.6, 0.3], [0.25, 0.3]]
+
+[[boxes]]
+name = "carton"
+size = [0.5, 0.5, 0.6]
+pose = [2.0, -0.72, 0.0]
+"""
+
+TINY_SCENARIO = """
+world = "tiny_world.toml"
+laps = 2
+seed = 3
+
+[mapper]
+hausdorff_restriction = "projection"
+"""
+
+
+def write_tiny(folder: Path, *, scenario: str = TINY_SCENARIO) -> Path:
+    """Write the tiny world and scenario into ``folder``; return the scenario path."""
+    (folder / "tiny_world.toml").write_text(TINY_WORLD)
+    path = folder / "tiny.toml"
+    path.write_text(scenario)
+    return path
