@@ -18,6 +18,19 @@ depend on the pose), and the pose is triangulated (ToTal + least squares) from t
 bearings of the matched posts. Every update is recorded (correction ``x_post - x_prior``
 and 1-sigma bounds, as plotted in the paper's Figure 5).
 
+A laser's range error has a white part and a systematic part, constant per instrument
+(an LMS100: 12 mm 1-sigma and up to +-30 mm). Fusing many posts per scan shrinks the
+covariance far below the systematic part, and since the posts do not surround the robot
+evenly (270 deg field of view) the bias shifts the pose: the filter turns overconfident.
+With ``EKFParams.range_bias_sigma > 0`` the state gains a fourth component, the range
+bias ``b`` (measured range ``= |post - sensor| + b``), estimated along with the pose;
+its prior is ``N(0, range_bias_sigma**2)`` and it may follow a slow random walk
+(``range_bias_walk``). ``pose``, ``covariance`` and ``history`` still describe the pose
+only; ``range_bias`` and ``range_bias_sigma`` give the bias. A re-localisation (or
+``initialize``) replaces the pose and its covariance but KEEPS the bias estimate and its
+variance: the bias belongs to the laser, not to the pose, and triangulation uses
+bearings only, so the new pose is independent of the bias (zero cross-covariance).
+
 Examples
 --------
 >>> import numpy as np
@@ -69,6 +82,9 @@ _MAX_HYPOTHESIS_OBSERVATIONS = 6
 # Minimum matched posts for a re-localisation (three object triangulation).
 _MIN_TRIANGULATION_POSTS = 3
 
+# Jacobian of one (range, bearing) observation with respect to the range bias.
+_BIAS_JACOBIAN = np.array([1.0, 0.0])
+
 
 def _wrap(angle: float) -> float:
     """Wrap a scalar angle to ``(-pi, pi]`` (scalar fast path of ``frames.wrap_angle``)."""
@@ -115,6 +131,15 @@ class EKFParams:
         when counting posts that agree with a re-localisation hypothesis.
     record_history
         Keep an ``EKFRecord`` of every update (Figure 5 of the paper).
+    range_bias_sigma
+        Prior 1-sigma (m) of the laser's systematic range error. ``0`` (default) keeps
+        the 3-state filter; ``> 0`` estimates the bias as a fourth state. For a bias
+        drawn uniformly in ``[-a, a]`` (a data-sheet "systematic error +-a") use
+        ``a / sqrt(3)``, e.g. 0.0173 m for an LMS100 (+-30 mm).
+    range_bias_walk
+        Random-walk density of the bias, m per square-root second (its variance grows by
+        ``range_bias_walk**2 * dt``); ``0`` (default) models a constant bias. Needs
+        ``range_bias_sigma > 0``.
 
     Examples
     --------
@@ -124,6 +149,10 @@ class EKFParams:
     Traceback (most recent call last):
     ...
     ValueError: EKFParams.outage_timeout must be > 0 s (got 0.0)...
+    >>> EKFParams(range_bias_walk=1e-4)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: EKFParams.range_bias_walk = 0.0001 needs the bias state: set range_bias_sigma...
     """
 
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -137,6 +166,8 @@ class EKFParams:
     min_reliability: float = DEFAULT_MIN_RELIABILITY
     relocalization_tolerance: float = 0.1
     record_history: bool = True
+    range_bias_sigma: float = 0.0
+    range_bias_walk: float = 0.0
 
     def __post_init__(self) -> None:
         mount = tuple(float(v) for v in self.mount)
@@ -145,10 +176,22 @@ class EKFParams:
                 f"EKFParams.mount must be three finite numbers (x, y, yaw), got {self.mount}"
             )
         object.__setattr__(self, "mount", mount)
-        for name in ("translation_sigma", "rotation_sigma", "rotation_per_distance_sigma"):
+        non_negative = (
+            "translation_sigma",
+            "rotation_sigma",
+            "rotation_per_distance_sigma",
+            "range_bias_sigma",
+            "range_bias_walk",
+        )
+        for name in non_negative:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"EKFParams.{name} must be finite and >= 0, got {value}")
+        if self.range_bias_walk > 0.0 and self.range_bias_sigma == 0.0:
+            raise ValueError(
+                f"EKFParams.range_bias_walk = {self.range_bias_walk} needs the bias state: "
+                "set range_bias_sigma > 0 (e.g. 0.0173 m for an LMS100) or the walk to 0"
+            )
         positive = {
             "min_increment_sigma": "a small odometry noise floor such as 1e-4",
             "nis_gate": "a chi-square quantile, e.g. 9.21 for 99% with 2 dof",
@@ -195,7 +238,7 @@ class EKFRecord:
     correction
         ``posterior - prior`` with the heading difference wrapped.
     sigma
-        1-sigma bounds ``sqrt(diag(P_post))``.
+        1-sigma bounds of the pose, ``sqrt(diag(P_post))[:3]``.
     landmarks
         Map indices of the landmarks used.
     nis
@@ -203,6 +246,9 @@ class EKFRecord:
         re-initialisation).
     reinitialized
         True when the pose came from triangulation rather than an EKF update.
+    range_bias, range_bias_sigma
+        Range-bias estimate and its 1-sigma after the update, metres (both 0 when the
+        filter has no bias state).
     """
 
     stamp: float
@@ -213,6 +259,8 @@ class EKFRecord:
     landmarks: tuple[int, ...]
     nis: tuple[float, ...]
     reinitialized: bool = False
+    range_bias: float = 0.0
+    range_bias_sigma: float = 0.0
 
 
 class _CompoundingEKF(ExtendedKalmanFilter):
@@ -221,9 +269,11 @@ class _CompoundingEKF(ExtendedKalmanFilter):
     def predict_x(self, u: np.ndarray = 0) -> None:
         x, y, theta = self.x[0, 0], self.x[1, 0], self.x[2, 0]
         c, s = math.cos(theta), math.sin(theta)
-        self.x = np.array(
-            [[x + c * u[0] - s * u[1]], [y + s * u[0] + c * u[1]], [_wrap(theta + u[2])]]
-        )
+        state = self.x.copy()  # a range-bias row, if any, is constant during prediction
+        state[0, 0] = x + c * u[0] - s * u[1]
+        state[1, 0] = y + s * u[0] + c * u[1]
+        state[2, 0] = _wrap(theta + u[2])
+        self.x = state
 
 
 @dataclass
@@ -258,6 +308,24 @@ class EKFLocalizer:
     [(0, 0), (1, 1), (2, 2)]
     >>> bool(np.abs(ekf.pose).max() < 1e-9), ekf.history[-1].reinitialized
     (True, True)
+
+    With a range-bias state, ranges 2 cm too long from posts all around are explained by
+    the bias, not by moving the robot:
+
+    >>> biased = EKFLocalizer(
+    ...     [[3.0, 0.0], [0.0, 3.0], [-3.0, 0.0], [0.0, -3.0]], EKFParams(range_bias_sigma=0.02)
+    ... )
+    >>> biased.initialize([0.0, 0.0, 0.0], np.diag([1e-2, 1e-2, 1e-4]), stamp=0.0)
+    >>> long = [
+    ...     LandmarkObservation(3.02, angle, np.diag([1e-4, 1e-6]), [k])
+    ...     for k, angle in enumerate([0.0, np.pi / 2, np.pi, -np.pi / 2])
+    ... ]
+    >>> for tick in range(25):
+    ...     _ = biased.update(long, stamp=0.1 * tick)
+    >>> round(biased.range_bias, 3), round(biased.range_bias_sigma, 4)
+    (0.02, 0.001)
+    >>> biased.pose.round(6) + 0.0
+    array([0., 0., 0.])
     """
 
     def __init__(self, landmarks: ArrayLike, params: EKFParams | None = None) -> None:
@@ -268,7 +336,14 @@ class EKFLocalizer:
             self.landmarks[:, None, :] - self.landmarks[None, :, :], axis=-1
         )
         self._mount = np.array(self.params.mount)
-        self._filter = _CompoundingEKF(dim_x=3, dim_z=2)
+        # The state is (x, y, theta) or, with a range-bias state, (x, y, theta, b).
+        self._has_bias = self.params.range_bias_sigma > 0.0
+        self._dim = 4 if self._has_bias else 3
+        self._filter = _CompoundingEKF(dim_x=self._dim, dim_z=2)
+        if self._has_bias:
+            self._filter.P[3, 3] = self.params.range_bias_sigma**2
+        # Time up to which the bias random walk has been added to the bias variance.
+        self._bias_stamp: float | None = None
         self.initialized = False
         # Time of the last accepted update; None: start the outage timer at the next one.
         self.last_update_stamp: float | None = None
@@ -278,29 +353,75 @@ class EKFLocalizer:
     @property
     def pose(self) -> np.ndarray:
         """Return the current pose estimate ``(x, y, theta)`` (a copy)."""
-        return self._filter.x[:, 0].copy()
+        return self._filter.x[:3, 0].copy()
 
     @property
     def covariance(self) -> np.ndarray:
-        """Return the current ``(3, 3)`` state covariance (a copy)."""
+        """Return the current ``(3, 3)`` pose covariance (a copy)."""
+        return self._filter.P[:3, :3].copy()
+
+    @property
+    def state_covariance(self) -> np.ndarray:
+        """Return the covariance of the whole state: ``(3, 3)``, or ``(4, 4)`` with the bias last.
+
+        Examples
+        --------
+        >>> EKFLocalizer([[1.0, 0.0]], EKFParams(range_bias_sigma=0.01)).state_covariance.shape
+        (4, 4)
+        """
         return self._filter.P.copy()
+
+    @property
+    def range_bias(self) -> float:
+        """Return the estimated range bias of the laser, m (0 without a bias state).
+
+        Examples
+        --------
+        >>> EKFLocalizer([[1.0, 0.0]]).range_bias  # a 3-state filter
+        0.0
+        """
+        return float(self._filter.x[3, 0]) if self._has_bias else 0.0
+
+    @property
+    def range_bias_sigma(self) -> float:
+        """Return the 1-sigma of the range-bias estimate, m (0 without a bias state).
+
+        Examples
+        --------
+        >>> EKFLocalizer([[1.0, 0.0]], EKFParams(range_bias_sigma=0.01)).range_bias_sigma
+        0.01
+        """
+        return math.sqrt(self._filter.P[3, 3]) if self._has_bias else 0.0
 
     def position_sigma(self) -> float:
         """Return the 1-sigma of the position along its most uncertain direction, m."""
         return _largest_sigma(self._filter.P)
 
     def initialize(self, pose: ArrayLike, cov: ArrayLike, stamp: float | None = None) -> None:
-        """Set the state and covariance, e.g. from a known start pose.
+        """Set the pose and its ``(3, 3)`` covariance, e.g. from a known start pose.
 
         ``stamp`` counts as the time of the last accepted update (the outage timer
-        starts there); with ``None`` it starts at the next ``update``.
+        starts there); with ``None`` it starts at the next ``update``. A range-bias
+        estimate and its variance are kept (the bias belongs to the laser, not to the
+        pose); the new pose is taken as independent of it.
         """
         pose = np.asarray(pose, dtype=float).reshape(3)
         cov = np.asarray(cov, dtype=float).reshape(3, 3)
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(cov))):
             raise ValueError("EKFLocalizer.initialize: pose and cov must be finite")
-        self._filter.x = np.array([[pose[0]], [pose[1]], [_wrap(float(pose[2]))]])
-        self._filter.P = self._repair_covariance(cov)
+        heading = _wrap(float(pose[2]))
+        if self._has_bias:
+            if stamp is not None:
+                self._propagate_bias(float(stamp))
+            bias, bias_variance = self._filter.x[3, 0], self._filter.P[3, 3]
+            self._filter.x = np.array([[pose[0]], [pose[1]], [heading], [bias]])
+            state_cov = np.zeros((4, 4))
+            state_cov[:3, :3] = self._repair_covariance(cov)
+            state_cov[3, 3] = bias_variance  # no cross terms: see the module docstring
+            self._filter.P = state_cov
+        else:
+            self._filter.x = np.array([[pose[0]], [pose[1]], [heading]])
+            self._filter.P = self._repair_covariance(cov)
         self.initialized = True
         self.last_update_stamp = None if stamp is None else float(stamp)
 
@@ -321,11 +442,19 @@ class EKFLocalizer:
         )
         theta = self._filter.x[2, 0]
         c, s = math.cos(theta), math.sin(theta)
-        self._filter.F = np.array(
-            [[1.0, 0.0, -s * u[0] - c * u[1]], [0.0, 1.0, c * u[0] - s * u[1]], [0.0, 0.0, 1.0]]
-        )
+        # The bias (if any) is untouched by driving: identity row/column in F, none in Q
+        # (its random walk is added by time, at the updates).
+        state_jacobian = np.eye(self._dim)
+        state_jacobian[0, 2] = -s * u[0] - c * u[1]
+        state_jacobian[1, 2] = c * u[0] - s * u[1]
+        self._filter.F = state_jacobian
         increment_jacobian = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        self._filter.Q = increment_jacobian @ sigma_u @ increment_jacobian.T
+        pose_noise = increment_jacobian @ sigma_u @ increment_jacobian.T
+        if self._has_bias:
+            self._filter.Q = np.zeros((4, 4))
+            self._filter.Q[:3, :3] = pose_noise
+        else:
+            self._filter.Q = pose_noise
         self._filter.predict(u)
 
     # ------------------------------------------------------------------ correction
@@ -344,6 +473,8 @@ class EKFLocalizer:
             The ``(observation index, landmark index)`` pairs that were used.
         """
         stamp = float(stamp)
+        if self._has_bias:
+            self._propagate_bias(stamp)
         if self.last_update_stamp is None:
             self.last_update_stamp = stamp
         lost = (
@@ -357,8 +488,15 @@ class EKFLocalizer:
                 return pairs
         if not self.initialized or not observations:
             return []
-        prior = self._filter.x[:, 0].copy()
+        prior = self._filter.x[:3, 0].copy()
         predicted, jacobians = range_bearing_model(prior, self.landmarks, self._mount)
+        if self._has_bias:
+            # range = |post - sensor| + b: d(range)/db = 1, d(bearing)/db = 0.
+            predicted[:, 0] += self._filter.x[3, 0]
+            pose_jacobians = jacobians
+            jacobians = np.empty((pose_jacobians.shape[0], 2, 4))
+            jacobians[:, :, :3] = pose_jacobians
+            jacobians[:, :, 3] = _BIAS_JACOBIAN
         nis = mahalanobis_matrix(observations, predicted, jacobians, self._filter.P)
         pairs = pairs_inside_gate(nis, self.params.nis_gate)
         if not pairs:
@@ -369,7 +507,7 @@ class EKFLocalizer:
             [(observations[k].range, observations[k].bearing) for k in obs_index]
         ).reshape(-1, 1)
         expected = predicted[landmark_index].reshape(-1, 1)
-        jacobian = jacobians[landmark_index].reshape(-1, 3)
+        jacobian = jacobians[landmark_index].reshape(-1, self._dim)
         noise = np.zeros((2 * len(pairs), 2 * len(pairs)))
         for row, k in enumerate(obs_index):
             noise[2 * row : 2 * row + 2, 2 * row : 2 * row + 2] = observations[k].covariance
@@ -401,6 +539,13 @@ class EKFLocalizer:
         self.predict(increment, increment_cov)
         return self.update(observations, stamp)
 
+    def _propagate_bias(self, stamp: float) -> None:
+        """Grow the bias variance by its random walk up to ``stamp`` (time never goes back)."""
+        if self._bias_stamp is not None and stamp > self._bias_stamp:
+            self._filter.P[3, 3] += self.params.range_bias_walk**2 * (stamp - self._bias_stamp)
+        if self._bias_stamp is None or stamp > self._bias_stamp:
+            self._bias_stamp = stamp
+
     # ------------------------------------------------------------------ re-localisation
     def relocalize(
         self, observations: Sequence[LandmarkObservation], stamp: float
@@ -410,7 +555,9 @@ class EKFLocalizer:
         Observations are matched to the map by their post-to-post distances (pose
         invariant) and a verification of every hypothesis against all observations; the
         best hypothesis is triangulated from its bearings. When hypotheses tie (a
-        symmetric layout), the one nearest the current estimate wins.
+        symmetric layout), the one nearest the current estimate wins. A range-bias
+        estimate is subtracted from the ranges for the matching and kept, with its
+        variance, in the new state (bearings say nothing about it).
 
         Returns
         -------
@@ -470,6 +617,10 @@ class EKFLocalizer:
         if len(observations) < _MIN_TRIANGULATION_POSTS or self.landmarks.shape[0] < 3:
             return None
         points = np.array([obs.point() for obs in observations])
+        if self._has_bias:
+            # Remove the estimated range bias: post-to-post distances come out truer.
+            ranges = np.array([obs.range for obs in observations])
+            points *= ((ranges - self.range_bias) / ranges)[:, None]
         tolerance = self.params.relocalization_tolerance
         nearest = np.argsort([obs.range for obs in observations])[:_MAX_HYPOTHESIS_OBSERVATIONS]
         hypotheses: list[_Hypothesis] = []
@@ -550,7 +701,7 @@ class EKFLocalizer:
         reinitialized: bool,
     ) -> None:
         """Append the correction just applied to ``history``."""
-        posterior = self._filter.x[:, 0].copy()
+        posterior = self._filter.x[:3, 0].copy()
         correction = posterior - prior
         correction[2] = _wrap(correction[2])
         self.history.append(
@@ -559,18 +710,21 @@ class EKFLocalizer:
                 prior=prior,
                 posterior=posterior,
                 correction=correction,
-                sigma=np.sqrt(np.diag(self._filter.P)),
+                sigma=np.sqrt(np.diag(self._filter.P)[:3]),
                 landmarks=tuple(landmarks),
                 nis=tuple(float(v) for v in nis),
                 reinitialized=reinitialized,
+                range_bias=self.range_bias,
+                range_bias_sigma=self.range_bias_sigma,
             )
         )
 
     def history_arrays(self) -> dict[str, np.ndarray]:
-        """Return the update history as arrays: stamp, correction, sigma, reinitialized.
+        """Return the update history as arrays: stamp, correction, sigma, reinitialized, bias.
 
         ``correction`` and ``sigma`` are ``(N, 3)``: exactly what the paper's Figure 5
-        plots (corrections of x, y, theta inside their sigma bounds).
+        plots (corrections of x, y, theta inside their sigma bounds). ``range_bias`` and
+        ``range_bias_sigma`` are ``(N,)`` (zeros without a bias state).
 
         Examples
         --------
@@ -583,6 +737,8 @@ class EKFLocalizer:
             "correction": np.array([r.correction for r in records], dtype=float).reshape(-1, 3),
             "sigma": np.array([r.sigma for r in records], dtype=float).reshape(-1, 3),
             "reinitialized": np.array([r.reinitialized for r in records], dtype=bool),
+            "range_bias": np.array([r.range_bias for r in records], dtype=float),
+            "range_bias_sigma": np.array([r.range_bias_sigma for r in records], dtype=float),
         }
 
 
@@ -594,14 +750,35 @@ def _largest_sigma(cov: np.ndarray) -> float:
 
 
 def _positive_definite(cov: np.ndarray) -> bool:
-    """Return whether a symmetric 3x3 matrix is positive definite (Sylvester's criterion).
+    """Return whether a symmetric 3x3 or 4x4 matrix is positive definite.
 
-    Closed form rather than a Cholesky call: this runs after every update.
+    Closed form (Sylvester's criterion) rather than a Cholesky call: this runs after
+    every update. A 4x4 matrix is positive definite iff its leading 3x3 block is and the
+    Schur complement of that block is positive.
+
+    Examples
+    --------
+    >>> _positive_definite(np.diag([1.0, 2.0, 3.0, 4.0])), _positive_definite(-np.eye(3))
+    (True, False)
     """
-    (a, b, c), (_, d, e), (_, _, f) = cov.tolist()
+    (a, b, c), (_, d, e), (_, _, f) = cov[:3, :3].tolist()
     minor2 = a * d - b * b
     determinant = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c)
-    return a > 0.0 and minor2 > 0.0 and determinant > 0.0
+    if not (a > 0.0 and minor2 > 0.0 and determinant > 0.0):
+        return False
+    if cov.shape[0] == 3:
+        return True
+    # Schur complement cov[3, 3] - v^T A^-1 v, A^-1 from the adjugate of the 3x3 block.
+    v0, v1, v2 = cov[:3, 3].tolist()
+    adjugate_quadratic = (
+        (d * f - e * e) * v0 * v0
+        + (a * f - c * c) * v1 * v1
+        + (a * d - b * b) * v2 * v2
+        + 2.0 * (c * e - b * f) * v0 * v1
+        + 2.0 * (b * e - c * d) * v0 * v2
+        + 2.0 * (b * c - a * e) * v1 * v2
+    )
+    return float(cov[3, 3]) - adjugate_quadratic / determinant > 0.0
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> float:

@@ -21,9 +21,11 @@ from numpy.typing import ArrayLike
 from semistatic.frames import wrap_angle
 
 __all__ = [
+    "AREA_MARGIN",
     "MATCH_DISTANCE",
     "MIN_TABLE1_SAMPLES",
     "PERSON_DISTANCE",
+    "clip_to_area",
     "detection_scores",
     "localization_metrics",
     "match_polylines_to_boxes",
@@ -39,6 +41,9 @@ PERSON_DISTANCE = 0.35
 
 MIN_TABLE1_SAMPLES = 5
 """Reference polylines associated fewer times than this are left out of Table 1."""
+
+AREA_MARGIN = 0.10
+"""Metres around the safety area within which a map polyline is scored."""
 
 DENSIFY_STEP = 0.02
 """Metres between points when a polyline is compared with an outline as a curve."""
@@ -80,6 +85,27 @@ def match_polylines_to_boxes(
     return result
 
 
+def clip_to_area(points: ArrayLike, area: shapely.Geometry) -> np.ndarray:
+    """Return the vertices of the longest piece of a polyline inside ``area`` (or none).
+
+    Examples
+    --------
+    >>> clip_to_area([[0.0, 0.0], [4.0, 0.0]], shapely.box(1.0, -1.0, 2.0, 1.0))
+    array([[1., 0.],
+           [2., 0.]])
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) < 2:
+        inside = len(pts) == 1 and area.contains(shapely.Point(pts[0]))
+        return pts if inside else np.empty((0, 2))
+    pieces = shapely.get_parts(shapely.intersection(shapely.LineString(pts), area))
+    lines = [piece for piece in pieces if isinstance(piece, shapely.LineString)]
+    if not lines:
+        return np.empty((0, 2))
+    longest = max(lines, key=lambda piece: piece.length)
+    return shapely.get_coordinates(longest)
+
+
 def detection_scores(true_positives: int, false_positives: int, false_negatives: int) -> dict:
     """Return precision, recall and F1 (1.0 where nothing was expected and nothing found).
 
@@ -112,9 +138,12 @@ def score_lap(
     """Score the local maps at the end of a lap against the true boxes.
 
     A box is *expected* in a segment's map when its outline meets the segment's safety
-    area. A map polyline is a true positive when it lies on some box, else a false
-    positive; an expected box with no polyline on it is a false negative. Returns the
-    scores and how many false polylines lie where a person walked this lap.
+    area. A local map describes what lies inside the safety area (paper Sec. 4), so each
+    map polyline is judged by its part inside the area (plus ``AREA_MARGIN``): a wall that
+    one scan polyline continued onto behind a box is context, not a false object. That
+    part is a true positive when it lies on some box, else a false positive; an expected
+    box with no polyline on it is a false negative. Returns the scores and how many false
+    polylines lie where a person walked this lap.
     """
     names = list(truth)
     boxes = {name: shapely.Polygon(np.asarray(truth[name], dtype=float)) for name in names}
@@ -125,7 +154,12 @@ def score_lap(
     )
     tp = fp = fn = from_people = 0
     for segment in segments:
-        lines = [line.points for line in local_maps[segment.name].world_polylines().values()]
+        area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
+        lines = [
+            clipped
+            for line in local_maps[segment.name].world_polylines().values()
+            if len(clipped := clip_to_area(line.points, area))
+        ]
         matches = match_polylines_to_boxes(lines, truth) if names else np.zeros((len(lines), 0))
         on_box = matches.any(axis=1)
         tp += int(on_box.sum())

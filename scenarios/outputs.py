@@ -175,10 +175,11 @@ def _figures(log: RunLog, staging: Path) -> None:
         if f["geometry"] is not None
     ]
     truth = log.truth_after_lap[-1] if log.truth_after_lap else None
+    last_lap = slice(log.laps[-1].first_tick if log.laps else 0, None)
     plot_polygonal_map(
         log.world, polylines, folder / "polygonal_map.png", truth_outlines=truth,
-        trajectory=np.asarray(log.true_poses).reshape(-1, 3),
-        estimate=np.asarray(log.estimated_poses).reshape(-1, 3),
+        trajectory=np.asarray(log.true_poses[last_lap]).reshape(-1, 3),
+        estimate=np.asarray(log.estimated_poses[last_lap]).reshape(-1, 3),
         title=f"{name}: semi-static local maps after lap {len(log.laps)} (paper Fig. 4)",
     )
     history = log.ekf_history
