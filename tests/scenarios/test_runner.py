@@ -85,3 +85,15 @@ def test_run_command_writes_the_output_directory(capsys, tmp_path):
     figures = {p.name for p in (out / "figures").iterdir()}
     assert {"polygonal_map.png", "ekf_corrections.png", "detection_scores.png"} <= figures
     assert (out / "table1.csv").read_text().splitlines()[0].startswith("environment,mean_avg")
+
+
+@pytest.mark.slow
+def test_adaptive_fields_still_stop_for_a_person_in_pal3b():
+    spec = load_scenario("pal3b", overrides=["laps=2", "policy=adaptive"])
+    metrics = summarize(run_scenario(spec))
+    safety = metrics["safety"]
+    # Lap 2 runs with adapted fields (the boxes are known), yet the worker stops the robot.
+    assert safety["stops_per_lap"][1] >= 1
+    assert safety["collisions"] == 0
+    assert metrics["detection"]["false_objects_from_people"] == 0
+    assert metrics["detection"]["f1"] >= 0.9
