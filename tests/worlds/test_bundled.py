@@ -27,8 +27,6 @@ from worlds.checks import (
     overlapping_solids,
     path_poses,
     people_in_obstacles,
-    placed,
-    segment_indices,
     spline_of,
     static_in_warning,
     swept_footprint,
