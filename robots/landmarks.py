@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -118,7 +119,13 @@ class LandmarkObservation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "range", float(self.range))
-        object.__setattr__(self, "bearing", float(wrap_angle(self.bearing)))
+        bearing = float(self.bearing)
+        if math.isfinite(bearing):
+            # wrap_angle's formula on a float: the same rounding without an array round trip.
+            bearing = math.pi - (math.pi - bearing) % (2.0 * math.pi)
+        else:
+            bearing = float(wrap_angle(bearing))
+        object.__setattr__(self, "bearing", bearing)
         covariance = np.array(self.covariance, dtype=np.float64)
         if covariance.shape != (2, 2):
             raise ValueError(
@@ -221,122 +228,237 @@ def detect_landmarks(
         return []
     max_jump = 2.0 * post_radius + 3.0 * range_sigma
     breaks = (np.diff(indices) > 1) | (np.abs(np.diff(ranges[indices])) > max_jump)
-    groups = np.split(indices, np.flatnonzero(breaks) + 1)
-    observations = []
-    for group in groups:
-        if group.size < min_beams:
-            continue
-        observation = _post_from_group(
-            group,
-            ranges,
-            angles,
-            valid,
-            scan.angle_increment,
-            post_radius,
-            range_sigma,
-            bearing_sigma,
-        )
-        if observation is not None:
-            observations.append(observation)
-    return observations
+    starts = np.flatnonzero(np.concatenate([[True], breaks]))
+    groups = _post_groups(
+        indices,
+        starts,
+        ranges,
+        angles,
+        valid,
+        scan.angle_increment,
+        post_radius,
+        range_sigma,
+        min_beams,
+    )
+    if not groups:
+        return []
+    return _posts_from_groups(groups, ranges, angles, post_radius, range_sigma, bearing_sigma)
 
 
-def _post_from_group(
-    group: np.ndarray,
+class _Group(NamedTuple):
+    """One group of bright beams that passed the shape checks of a post."""
+
+    beams: np.ndarray
+    distance: float  # first estimate of the centre distance: nearest return + radius, m
+    first_angle: float  # angles of the first and last bright beam
+    last_angle: float
+    low_miss: float  # angle of the missed beam before the group (the silhouette ends after it)
+    high_miss: float  # angle of the missed beam after the group
+
+
+def _post_groups(
+    indices: np.ndarray,
+    starts: np.ndarray,
     ranges: np.ndarray,
     angles: np.ndarray,
     valid: np.ndarray,
     increment: float,
     radius: float,
     range_sigma: float,
-    bearing_sigma: float,
-) -> LandmarkObservation | None:
-    """Return the post observation of one group of bright beams, or None if not a post."""
-    hit_ranges = ranges[group]
-    hit_angles = angles[group]
-    first, last = int(group[0]), int(group[-1])
-    if first == 0 or last == ranges.size - 1:
-        return None  # cut by the edge of the field of view: its centre is unknowable
-    near = float(hit_ranges.min())
-    if hit_ranges.max() - near > radius + 3.0 * range_sigma:
-        return None
-    distance = near + radius
-    half_width = math.asin(min(1.0, radius / distance))
-    if hit_angles[-1] - hit_angles[0] > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
-        return None  # too wide for a post: a reflective strip, a shiny wall
-    if group.size < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
-        return None  # too narrow: a post this close covers more beams (a speck, a glint)
-    # A neighbour beam in front of the post hides part of it: the visible part's middle
-    # is not the centre, and no honest small covariance exists, so the post is skipped.
-    occluder_limit = near - _OCCLUDER_SIGMAS * range_sigma
-    for neighbour in (first - 1, last + 1):
-        if valid[neighbour] and ranges[neighbour] < occluder_limit:
-            return None
-    for _ in range(_CENTRE_ITERATIONS):
+    min_beams: int,
+) -> list[_Group]:
+    """Return the groups of bright beams whose extent fits a post, in scan order.
+
+    A group starts at each position ``starts`` of ``indices`` (the bright beams).
+    """
+    hit_ranges = ranges[indices]
+    # Per-group nearest and farthest return in one pass; the checks are then on floats.
+    nears = np.minimum.reduceat(hit_ranges, starts).tolist()
+    fars = np.maximum.reduceat(hit_ranges, starts).tolist()
+    stops = [*starts[1:].tolist(), indices.size]
+    firsts = indices[starts].tolist()
+    lasts = indices[np.asarray(stops) - 1].tolist()
+    last_beam = ranges.size - 1
+    groups = []
+    for start, stop, first, last, near, far in zip(
+        starts.tolist(), stops, firsts, lasts, nears, fars, strict=True
+    ):
+        if stop - start < min_beams:
+            continue
+        if first == 0 or last == last_beam:
+            continue  # cut by the edge of the field of view: its centre is unknowable
+        if far - near > radius + 3.0 * range_sigma:
+            continue
+        distance = near + radius
         half_width = math.asin(min(1.0, radius / distance))
-        low, high = hit_angles[-1] - half_width, hit_angles[0] + half_width
-        # The neighbouring beams missed the post: its silhouette ends before them.
-        low = max(low, angles[first - 1] + half_width)
-        high = min(high, angles[last + 1] - half_width)
-        if low > high:  # noise made the bounds cross: fall back to the hits alone
-            low, high = sorted((hit_angles[-1] - half_width, hit_angles[0] + half_width))
-        bearing, bearing_variance = _centre_bearing(
-            hit_ranges, hit_angles, low, high, radius, max(range_sigma, _RANGE_SIGMA_FLOOR)
+        first_angle, last_angle = float(angles[first]), float(angles[last])
+        if last_angle - first_angle > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
+            continue  # too wide for a post: a reflective strip, a shiny wall
+        if stop - start < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
+            continue  # too narrow: a post this close covers more beams (a speck, a glint)
+        # A neighbour beam in front of the post hides part of it: the visible part's middle
+        # is not the centre, and no honest small covariance exists, so the post is skipped.
+        occluder_limit = near - _OCCLUDER_SIGMAS * range_sigma
+        if any(valid[n] and ranges[n] < occluder_limit for n in (first - 1, last + 1)):
+            continue
+        groups.append(
+            _Group(
+                indices[start:stop],
+                distance,
+                first_angle,
+                last_angle,
+                float(angles[first - 1]),
+                float(angles[last + 1]),
+            )
         )
-        bearing_variance += bearing_sigma**2
-        distance, range_variance, cross = _centre_range(
-            hit_ranges, hit_angles - bearing, radius, range_sigma, bearing_variance
-        )
-    covariance = np.array([[range_variance, cross], [cross, bearing_variance]])
-    return LandmarkObservation(distance, bearing, covariance, group)
+    return groups
 
 
-def _centre_bearing(
-    hit_ranges: np.ndarray,
-    hit_angles: np.ndarray,
-    low: float,
-    high: float,
+def _posts_from_groups(
+    groups: list[_Group],
+    ranges: np.ndarray,
+    angles: np.ndarray,
     radius: float,
     range_sigma: float,
-) -> tuple[float, float]:
-    """Return the posterior mean and variance of the centre bearing on ``[low, high]``.
+    bearing_sigma: float,
+) -> list[LandmarkObservation]:
+    """Estimate the centre of every accepted group at once and return the observations.
 
-    The prior is uniform on the interval allowed by the hits and misses; the likelihood
-    of a candidate bearing compares the measured ranges with those of the circle
-    (centre distance profiled by least squares). With noisy ranges this stays near the
-    middle of the interval; with precise ranges it locks onto the true centre.
+    The groups' beams are stacked into ``(G, B)`` arrays padded to the largest group
+    (``mask`` marks the real beams), so each estimation step is one numpy pass over all
+    posts of the scan rather than one per post.
     """
-    if not high > low:
-        return 0.5 * (low + high), 0.0
-    candidates = np.linspace(low, high, _BEARING_CANDIDATES)
-    offsets = hit_angles[None, :] - candidates[:, None]
-    sine, cosine = np.sin(offsets), np.cos(offsets)
-    chord_sq = np.maximum(radius**2 - (hit_ranges * sine) ** 2, 0.0)
+    width = max(group.beams.size for group in groups)
+    mask = np.zeros((len(groups), width), dtype=bool)
+    beams = np.zeros((len(groups), width), dtype=np.int64)
+    for row, group in enumerate(groups):
+        mask[row, : group.beams.size] = True
+        beams[row] = group.beams[0]  # padding repeats a real (finite) hit ...
+        beams[row, : group.beams.size] = group.beams
+    hits = _Hits(ranges[beams], angles[beams], mask)  # ... the mask keeps it out of sums
+    distance = [group.distance for group in groups]
+    likelihood_sigma = max(range_sigma, _RANGE_SIGMA_FLOOR)
+    for _ in range(_CENTRE_ITERATIONS):
+        lows, highs = [], []
+        for group, centre in zip(groups, distance, strict=True):
+            half_width = math.asin(min(1.0, radius / centre))
+            low = group.last_angle - half_width
+            high = group.first_angle + half_width
+            # The neighbouring beams missed the post: its silhouette ends before them.
+            low = max(low, group.low_miss + half_width)
+            high = min(high, group.high_miss - half_width)
+            if low > high:  # noise made the bounds cross: fall back to the hits alone
+                low, high = sorted((group.last_angle - half_width, group.first_angle + half_width))
+            lows.append(low)
+            highs.append(high)
+        bearing, bearing_variance = _centre_bearings(
+            hits, np.array(lows), np.array(highs), radius, likelihood_sigma
+        )
+        bearing_variance = bearing_variance + bearing_sigma**2
+        distance, range_variance, cross = _centre_ranges(
+            hits, bearing, radius, range_sigma, bearing_variance
+        )
+        distance = distance.tolist()
+    return [
+        LandmarkObservation(centre, direction, np.array([[r_var, c], [c, b_var]]), group.beams)
+        for group, centre, direction, r_var, c, b_var in zip(
+            groups,
+            distance,
+            bearing.tolist(),
+            range_variance.tolist(),
+            cross.tolist(),
+            bearing_variance.tolist(),
+            strict=True,
+        )
+    ]
+
+
+class _Hits:
+    """The bright beams of G groups as padded ``(G, B)`` arrays, with what both passes reuse.
+
+    ``mask`` marks real beams; padded entries repeat a real hit, so every value stays
+    finite and multiplying by the 0/1 ``weight`` removes them from sums exactly.
+    """
+
+    def __init__(self, ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray) -> None:
+        self.ranges, self.angles, self.mask = ranges, angles, mask
+        self.weight = mask.astype(float)
+        self.count = mask.sum(axis=1)
+        # (G, B, 1) views for the (G, B, candidates) arrays of the bearing likelihood.
+        self.ranges_3d = ranges[:, :, None]
+        self.weight_3d = self.weight[:, :, None]
+        self.count_3d = self.count[:, None, None]
+        self.sin_3d = np.sin(angles)[:, :, None]
+        self.cos_3d = np.cos(angles)[:, :, None]
+
+
+# The candidate grid of numpy.linspace(low, high, n): ramp * step + low, then the end.
+# (linspace's special case for a step that underflows to 0 only matters for intervals
+# below 1e-320 rad, which round to a point either way.)
+_RAMP = np.arange(_BEARING_CANDIDATES, dtype=float)
+
+
+def _centre_bearings(
+    hits: _Hits,
+    low: np.ndarray,
+    high: np.ndarray,
+    radius: float,
+    range_sigma: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the posterior mean and variance of each centre bearing on ``[low, high]``.
+
+    Row ``g`` is one post. The prior is uniform on the interval allowed by the hits and
+    misses; the likelihood of a candidate bearing compares the measured ranges with
+    those of the circle (centre distance profiled by least squares). With noisy ranges
+    this stays near the middle of the interval; with precise ranges it locks onto the
+    true centre. An empty interval (``low == high``) gives its point with zero variance.
+    """
+    candidates = _RAMP * ((high - low) / (_BEARING_CANDIDATES - 1))[:, None]
+    candidates += low[:, None]
+    candidates[:, -1] = high
+    # Arrays are (G, beams, candidates): the candidates, the longest axis, vary fastest.
+    # sin and cos of (beam angle - candidate) come from the angle difference identities:
+    # (G, B) + (G, candidates) evaluations instead of full (G, B, candidates) ones (the
+    # bulk of the work otherwise); they agree with the direct ones to ~1e-16.
+    candidate_sin = np.sin(candidates)[:, None, :]
+    candidate_cos = np.cos(candidates)[:, None, :]
+    sine = hits.sin_3d * candidate_cos - hits.cos_3d * candidate_sin
+    cosine = hits.cos_3d * candidate_cos + hits.sin_3d * candidate_sin
+    ranges, radius_sq = hits.ranges_3d, radius * radius
+    chord_sq = np.maximum(radius_sq - (ranges * sine) ** 2, 0.0)
     # Centre distance for each candidate: the mean of the beams' individual estimates.
-    distance = (hit_ranges * cosine + np.sqrt(chord_sq)).mean(axis=1, keepdims=True)
-    expected = distance * cosine - np.sqrt(np.maximum(radius**2 - (distance * sine) ** 2, 0.0))
-    misfit = ((hit_ranges - expected) ** 2).sum(axis=1) / range_sigma**2
-    weights = np.exp(-0.5 * (misfit - misfit.min()))
-    weights /= weights.sum()
-    mean = float(weights @ candidates)
-    return mean, float(weights @ (candidates - mean) ** 2)
+    estimates = (ranges * cosine + np.sqrt(chord_sq)) * hits.weight_3d
+    distance = estimates.sum(axis=1, keepdims=True) / hits.count_3d
+    expected = distance * cosine - np.sqrt(np.maximum(radius_sq - (distance * sine) ** 2, 0.0))
+    misfit = (((ranges - expected) ** 2) * hits.weight_3d).sum(axis=1) / range_sigma**2
+    weights = np.exp(-0.5 * (misfit - misfit.min(axis=1, keepdims=True)))
+    weights /= weights.sum(axis=1, keepdims=True)
+    mean = np.einsum("gk,gk->g", weights, candidates)
+    variance = np.einsum("gk,gk->g", weights, (candidates - mean[:, None]) ** 2)
+    empty = ~(high > low)
+    if empty.any():
+        mean[empty], variance[empty] = 0.5 * (low[empty] + high[empty]), 0.0
+    return mean, variance
 
 
-def _centre_range(
-    hit_ranges: np.ndarray,
-    offsets: np.ndarray,
+def _centre_ranges(
+    hits: _Hits,
+    bearing: np.ndarray,
     radius: float,
     range_sigma: float,
-    bearing_variance: float,
-) -> tuple[float, float, float]:
-    """Return the centre distance, its variance and its covariance with the bearing.
+    bearing_variance: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return each centre distance, its variance and its covariance with the bearing.
 
-    Each beam at angular offset ``delta`` from the centre direction, hitting at range
-    ``r``, puts the centre at ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near
-    the post's silhouette are very sensitive to the range noise and to the bearing
-    error (the square root's slope diverges there), so the beams are averaged with
-    inverse-variance weights from first-order propagation of both.
+    Row ``g`` is one post seen in direction ``bearing[g]``. Each beam at angular offset
+    ``delta`` from the centre direction, hitting at range ``r``, puts the centre at
+    ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near the post's silhouette are
+    very sensitive to the range noise and to the bearing error (the square root's slope
+    diverges there), so the beams are averaged with inverse-variance weights from
+    first-order propagation of both.
     """
+    hit_ranges = hits.ranges
+    offsets = hits.angles - bearing[:, None]
     sine, cosine = np.sin(offsets), np.cos(offsets)
     across_sq = (hit_ranges * sine) ** 2
     # Keep the square root away from 0, where the slopes diverge (grazing beams).
@@ -344,15 +466,16 @@ def _centre_range(
     depth = np.sqrt(np.maximum(radius**2 - across_sq, (_GRAZING_DEPTH * radius) ** 2))
     slope_range = cosine - hit_ranges * sine**2 / depth
     slope_bearing = hit_ranges * sine + hit_ranges**2 * sine * cosine / depth
-    variance = range_sigma**2 * slope_range**2 + bearing_variance * slope_bearing**2
-    weights = 1.0 / np.maximum(variance, _MIN_RANGE_VARIANCE)
-    weights /= weights.sum()
+    variance = range_sigma**2 * slope_range**2 + bearing_variance[:, None] * slope_bearing**2
+    weights = hits.weight / np.maximum(variance, _MIN_RANGE_VARIANCE)
+    weights /= weights.sum(axis=1, keepdims=True)
     # The range noise is independent per beam; the bearing error is shared by all beams,
     # so it enters coherently and also correlates the range with the bearing estimate.
-    coupling = float(weights @ slope_bearing)
-    range_variance = float(weights**2 @ slope_range**2) * range_sigma**2
+    coupling = np.einsum("gb,gb->g", weights, slope_bearing)
+    range_variance = np.einsum("gb,gb->g", weights**2, slope_range**2) * range_sigma**2
     range_variance += coupling**2 * bearing_variance
-    return float(weights @ along), range_variance, coupling * bearing_variance
+    distance = np.einsum("gb,gb->g", weights, along)
+    return distance, range_variance, coupling * bearing_variance
 
 
 def range_bearing_model(

@@ -27,7 +27,9 @@ array([ 0.   ,  0.   , -0.137])
 
 from __future__ import annotations
 
+import bisect
 import itertools
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -155,6 +157,17 @@ class SplinePath:
         self._coarse_t = self._t(self._coarse_s)
         self._coarse_points = self._evaluate(self._coarse_t)[0]
 
+        # The same pieces as Python floats, for one-point queries (the follower's 50 Hz
+        # pose, curvature and projection): math on floats costs a fraction of numpy's
+        # per-call overhead on tiny arrays, and evaluates the very same expressions.
+        self._spline_scalar = _ScalarCubic(self._breaks, self._coefficients)
+        self._s_to_t_scalar = _ScalarCubic(self._s_to_t_breaks, self._s_to_t_coefficients)
+        self._t_to_s_scalar = _ScalarCubic(self._t_to_s_breaks, self._t_to_s_coefficients)
+        self._coarse_s_list = self._coarse_s.tolist()
+        self._coarse_t_list = self._coarse_t.tolist()
+        self._coarse_x = np.ascontiguousarray(self._coarse_points[:, 0])
+        self._coarse_y = np.ascontiguousarray(self._coarse_points[:, 1])
+
     def __repr__(self) -> str:
         return (
             f"SplinePath({self.knots.shape[0]} knots, length={self.length:.3f} m, "
@@ -177,6 +190,10 @@ class SplinePath:
         """Return position, first and second ``t``-derivative of the spline at ``t``."""
         return _evaluate_cubic(self._breaks, self._coefficients, t)
 
+    def _t_one(self, s: float) -> float:
+        """Return ``t(s)`` for one finite float ``s``, exactly as ``_t`` computes it."""
+        return self._s_to_t_scalar.value(min(max(s, 0.0), self.length))
+
     def point(self, s: ArrayLike) -> np.ndarray:
         """Return the path point(s) at arc length ``s``: shape ``s.shape + (2,)``.
 
@@ -195,6 +212,9 @@ class SplinePath:
         >>> round(SplinePath([(0.0, 0.0), (0.0, 3.0)]).heading(1.0), 4)
         1.5708
         """
+        if _is_finite_float(s):
+            _, _, dx, dy, _, _ = self._spline_scalar.evaluate(self._t_one(s))
+            return float(np.arctan2(dy, dx))
         velocity = self._evaluate(self._t(s))[1]
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
         return float(heading) if heading.ndim == 0 else heading
@@ -208,6 +228,10 @@ class SplinePath:
         >>> round(parabola.curvature(parabola.length / 2), 2)  # y = 1 - x^2 at its apex
         2.0
         """
+        if _is_finite_float(s):
+            _, _, dx, dy, ddx, ddy = self._spline_scalar.evaluate(self._t_one(s))
+            # numpy's hypot and power, not math's: they round differently in the last bit.
+            return float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
         _, d1, d2 = self._evaluate(self._t(s))
         cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
         curvature = cross / np.hypot(d1[..., 0], d1[..., 1]) ** 3
@@ -221,6 +245,9 @@ class SplinePath:
         >>> SplinePath([(0.0, 0.0), (2.0, 0.0)]).pose(0.5)
         array([0.5, 0. , 0. ])
         """
+        if _is_finite_float(s):
+            x, y, dx, dy, _, _ = self._spline_scalar.evaluate(self._t_one(s))
+            return np.array([x, y, np.arctan2(dy, dx)])
         point, velocity, _ = self._evaluate(self._t(s))
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
         return np.concatenate([point, heading[..., None]], axis=-1)
@@ -314,9 +341,6 @@ class SplinePath:
         """
         points = np.asarray(xy, dtype=float)
         single = points.ndim == 1
-        points = points.reshape(-1, 2)
-        if not np.all(np.isfinite(points)):
-            raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
         if s_hint is None:
             if window is not None:
                 raise ValueError("SplinePath.project: window needs s_hint (where to centre it)")
@@ -325,8 +349,17 @@ class SplinePath:
             window = 1.0 if window is None else float(window)
             if not window > 0.0:
                 raise ValueError(f"SplinePath.project: window must be > 0 m, got {window}")
-            centre = float(np.clip(s_hint, 0.0, self.length))
+            # min/max on a float clip like numpy.clip (nan stays nan) at a tenth of the cost.
+            centre = min(max(float(s_hint), 0.0), self.length)
             lo, hi = max(0.0, centre - window), min(self.length, centre + window)
+        if points.shape == (2,):
+            x, y = float(points[0]), float(points[1])
+            if not (math.isfinite(x) and math.isfinite(y)):
+                raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
+            return self._project_one(x, y, lo, hi)
+        points = points.reshape(-1, 2)
+        if not np.all(np.isfinite(points)):
+            raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
         seeds, brackets_lo, brackets_hi = self._seed_projection(points, lo, hi)
         basins, count = seeds.shape[1], points.shape[0]
         t, position = self._refine_projection(
@@ -341,6 +374,88 @@ class SplinePath:
         s = _evaluate_cubic(self._t_to_s_breaks, self._t_to_s_coefficients, t_best)[0]
         s = np.minimum(np.maximum(s, lo), hi)
         return float(s[0]) if single else s
+
+    def _project_one(self, x: float, y: float, lo: float, hi: float) -> float:
+        """Project one point: the same seeds, brackets and iterations as the array path.
+
+        A scalar transcription of ``_seed_projection`` + ``_refine_projection`` (the same
+        float operations in the same order, so the same result to the last bit) that
+        skips numpy's overhead on arrays of three rows: this runs at the control rate.
+        """
+        spline = self._spline_scalar
+        # Seeds: the coarse samples strictly inside (lo, hi), framed by the window ends.
+        first = bisect.bisect_right(self._coarse_s_list, lo)
+        last = bisect.bisect_left(self._coarse_s_list, hi, lo=first)
+        t_lo, t_hi = self._t_one(lo), self._t_one(hi)
+        x_lo, y_lo = spline.evaluate(t_lo)[:2]
+        x_hi, y_hi = spline.evaluate(t_hi)[:2]
+        candidates = [t_lo, *self._coarse_t_list[first:last], t_hi]
+        inner = (
+            (x - self._coarse_x[first:last]) ** 2 + (y - self._coarse_y[first:last]) ** 2
+        ).tolist()
+        # Products, not ``** 2``: numpy squares by multiplying, C's pow() may round otherwise.
+        distance = [_square_sum(x - x_lo, y - y_lo), *inner, _square_sum(x - x_hi, y - y_hi)]
+        count = len(distance)
+        minima = [
+            k
+            for k in range(count)
+            if (k == 0 or distance[k] <= distance[k - 1])
+            and (k == count - 1 or distance[k] <= distance[k + 1])
+        ]
+        # A stable sort of the local minima by distance, then (as the array path's stable
+        # argsort ranks every other sample at +inf) the first non-minima in scan order.
+        basins = sorted(minima, key=distance.__getitem__)[:PROJECTION_BASINS]
+        wanted = min(PROJECTION_BASINS, count)
+        if len(basins) < wanted:
+            chosen = set(minima)
+            basins += [k for k in range(count) if k not in chosen][: wanted - len(basins)]
+        seeds = [candidates[k] for k in basins]
+        lows = [candidates[max(k - 1, 0)] for k in basins]
+        highs = [candidates[min(k + 1, count - 1)] for k in basins]
+
+        # Refinement: safeguarded Newton on all basins in lock step (as the array path).
+        t_values, positions, active = [], [], []
+        for seed, low, high in zip(seeds, lows, highs, strict=True):
+            slope_low, _, position_low = self._distance_slope_one(low, x, y)
+            slope_high, _, position_high = self._distance_slope_one(high, x, y)
+            at_low, at_high = slope_low >= 0.0, slope_high <= 0.0
+            active.append(not at_low and not at_high)
+            t_values.append(low if at_low else (high if at_high else seed))
+            positions.append(position_low if at_low else position_high)
+        steps = [0.0] * len(basins)
+        for _ in range(PROJECTION_ITERATIONS):
+            if not any(active):
+                break
+            for b, t in enumerate(t_values):
+                if not active[b]:
+                    continue
+                slope, second, here = self._distance_slope_one(t, x, y)
+                positions[b] = here
+                if slope < 0.0:
+                    lows[b] = t
+                if slope > 0.0:
+                    highs[b] = t
+                low, high = lows[b], highs[b]
+                if second > 0.0 and low <= (newton := t - slope / second) <= high:
+                    steps[b] = newton - t
+                else:
+                    steps[b] = 0.5 * (low + high) - t
+            if all(abs(step) < PROJECTION_TOLERANCE for step in steps):
+                break
+            t_values = [t + step for t, step in zip(t_values, steps, strict=True)]
+        else:
+            positions = [spline.evaluate(t)[:2] for t in t_values]
+        gaps = [_square_sum(px - x, py - y) for px, py in positions]
+        t_best = t_values[gaps.index(min(gaps))]
+        return min(max(self._t_to_s_scalar.value(t_best), lo), hi)
+
+    def _distance_slope_one(
+        self, t: float, x: float, y: float
+    ) -> tuple[float, float, tuple[float, float]]:
+        """Return ``_distance_slope`` for one ``t`` and one point ``(x, y)``."""
+        px, py, dx, dy, ddx, ddy = self._spline_scalar.evaluate(t)
+        ox, oy = px - x, py - y
+        return ox * dx + oy * dy, (dx * dx + dy * dy) + (ox * ddx + oy * ddy), (px, py)
 
     def _seed_projection(
         self, points: np.ndarray, lo: float, hi: float
@@ -433,6 +548,51 @@ def _evaluate_cubic(
     first = (3.0 * c3 * h + 2.0 * c2) * h + c1
     second = 6.0 * c3 * h + 2.0 * c2
     return value, first, second
+
+
+class _ScalarCubic:
+    """A piecewise cubic (scipy ``PPoly`` layout) as Python floats, evaluated one ``x`` at a time.
+
+    Performs exactly the float operations of ``_evaluate_cubic`` for one ``x`` (same
+    piece search, same Horner order), so the two agree to the last bit.
+    """
+
+    def __init__(self, breaks: np.ndarray, coefficients: np.ndarray) -> None:
+        self.breaks = breaks.tolist()
+        self.last_piece = len(self.breaks) - 2
+        # One flat tuple per piece: (c3, c2, c1, c0), or (c3x, c3y, c2x, ..., c0y).
+        self.pieces = [tuple(piece.ravel().tolist()) for piece in np.moveaxis(coefficients, 1, 0)]
+
+    def _piece(self, x: float) -> tuple[float, tuple[float, ...]]:
+        piece = min(max(bisect.bisect_right(self.breaks, x) - 1, 0), self.last_piece)
+        return x - self.breaks[piece], self.pieces[piece]
+
+    def value(self, x: float) -> float:
+        """Return the value of a scalar-valued cubic at ``x``."""
+        h, (c3, c2, c1, c0) = self._piece(x)
+        return ((c3 * h + c2) * h + c1) * h + c0
+
+    def evaluate(self, x: float) -> tuple[float, float, float, float, float, float]:
+        """Return ``(x, y, x', y', x'', y'')`` of a 2-vector-valued cubic at ``x``."""
+        h, (c3x, c3y, c2x, c2y, c1x, c1y, c0x, c0y) = self._piece(x)
+        return (
+            ((c3x * h + c2x) * h + c1x) * h + c0x,
+            ((c3y * h + c2y) * h + c1y) * h + c0y,
+            (3.0 * c3x * h + 2.0 * c2x) * h + c1x,
+            (3.0 * c3y * h + 2.0 * c2y) * h + c1y,
+            6.0 * c3x * h + 2.0 * c2x,
+            6.0 * c3y * h + 2.0 * c2y,
+        )
+
+
+def _square_sum(dx: float, dy: float) -> float:
+    """Return ``dx**2 + dy**2`` rounded as numpy rounds it (two products, one sum)."""
+    return dx * dx + dy * dy
+
+
+def _is_finite_float(s: object) -> bool:
+    """Return whether ``s`` is one finite float (or int), the case of the scalar fast paths."""
+    return isinstance(s, float | int) and not isinstance(s, bool) and math.isfinite(s)
 
 
 def _table_nodes(knot_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

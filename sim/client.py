@@ -106,6 +106,9 @@ class SimClient:
             deterministicOverlappingPairs=1,
         )
         self.bullet.setRealTimeSimulation(0)
+        # BulletClient builds a new partial on every attribute access (~1 us): bind the
+        # per-step call once.
+        self._step_simulation = self.bullet.stepSimulation
         if self.gui:
             self.bullet.configureDebugVisualizer(self.bullet.COV_ENABLE_GUI, 0)
 
@@ -142,7 +145,7 @@ class SimClient:
         if n < 0:
             raise ValueError(f"SimClient.step: n must be >= 0 (got {n})")
         self._require_open()
-        step_simulation = self.bullet.stepSimulation  # bind once: no per-step lookup
+        step_simulation = self._step_simulation
         start = time.perf_counter()
         for _ in range(n):
             step_simulation()

@@ -98,6 +98,9 @@ class ContactMonitor:
         self.separation_time = float(separation_time)
         self.events: list[Contact] = []
         self._last_seen: dict[int, float] = {}
+        # Bound once: BulletClient builds a new partial on every attribute access, and
+        # this runs after every physics step.
+        self._contact_points = sim.bullet.getContactPoints
 
     @property
     def collisions(self) -> int:
@@ -112,7 +115,7 @@ class ContactMonitor:
         """Return the robot's current contacts, one per other body, and record new collisions."""
         now = float(self.sim.sim_time)
         by_body: dict[int, list] = {}
-        for point in self.sim.bullet.getContactPoints(bodyA=self.robot_body_id):
+        for point in self._contact_points(bodyA=self.robot_body_id):
             other = point[_BODY_B]
             if other in (self.robot_body_id, self.world.floor_id):
                 continue

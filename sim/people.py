@@ -22,6 +22,8 @@ True
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from worlds.spec import PersonSpec
@@ -67,8 +69,48 @@ def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
     return route[leg] + fraction * (route[leg + 1] - route[leg])
 
 
+class _Walk:
+    """One person's route precomputed as floats: ``person_position`` without numpy per call.
+
+    ``People.update`` runs at every physics step; rebuilding the route's arc lengths with
+    numpy each time cost more than the engine's teleport. The arithmetic is that of
+    ``person_position`` (arc lengths from the same numpy calls, then the same float
+    operations), so both give the same positions to the last bit.
+    """
+
+    def __init__(self, person: PersonSpec) -> None:
+        route = _route(person)
+        steps = np.hypot(*np.diff(route, axis=0).T)
+        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        self.person = person
+        self.route = route.tolist()
+        self.steps = steps.tolist()
+        self.arc = arc.tolist()
+        self.total = float(arc[-1])
+
+    def position(self, t: float) -> tuple[float, float] | None:
+        """Return ``(x, y)`` at ``t`` on this person's clock, ``None`` before the start."""
+        person = self.person
+        if t < person.start_time:
+            return None
+        if self.total <= 0.0:
+            x, y = self.route[0]
+            return x, y
+        walked = person.speed * (t - person.start_time)
+        walked = walked % self.total if person.loop else min(walked, self.total)
+        leg = min(max(bisect.bisect_right(self.arc, walked) - 1, 0), len(self.steps) - 1)
+        step = self.steps[leg]
+        fraction = 0.0 if step == 0.0 else (walked - self.arc[leg]) / step
+        (x0, y0), (x1, y1) = self.route[leg], self.route[leg + 1]
+        return x0 + fraction * (x1 - x0), y0 + fraction * (y1 - y0)
+
+
 class People:
     """Moves the person bodies of a ``SimWorld`` to their positions at a given time.
+
+    A body is teleported only when its position changed since the last update: a
+    person waiting for their start (parked) or standing at the end of their route
+    costs no engine call.
 
     Parameters
     ----------
@@ -94,8 +136,12 @@ class People:
     def __init__(self, world) -> None:
         self.world = world
         self._bullet = world.sim.bullet
-        self._ids = {person.name: world.person_id(person.name) for person in world.people}
+        # The people built into the world are fixed when it is built.
+        self._walks = [_Walk(person) for person in world.people]
+        self._ids = {walk.person.name: world.person_id(walk.person.name) for walk in self._walks}
         self._upright = self._bullet.getQuaternionFromEuler([0.0, 0.0, 0.0])
+        # Where each body was last put (None: not yet, so the first update places all).
+        self._placed: dict[str, tuple[float, float, float] | None] = dict.fromkeys(self._ids)
 
     def update(self, t: float, lap_start: float = 0.0) -> dict[str, np.ndarray | None]:
         """Place every person where its route puts it at run time ``t``.
@@ -105,13 +151,19 @@ class People:
         yet in the scene.
         """
         positions: dict[str, np.ndarray | None] = {}
-        for person in self.world.people:
+        for walk in self._walks:
+            person = walk.person
             clock = t - lap_start if person.per_lap else t
-            xy = person_position(person, clock)
-            positions[person.name] = xy
+            xy = walk.position(clock)
             if xy is None:
-                xyz = [float(person.waypoints[0][0]), float(person.waypoints[0][1]), PARKED_Z]
+                positions[person.name] = None
+                xyz = (float(person.waypoints[0][0]), float(person.waypoints[0][1]), PARKED_Z)
             else:
-                xyz = [float(xy[0]), float(xy[1]), 0.0]  # body frames sit on the floor
-            self._bullet.resetBasePositionAndOrientation(self._ids[person.name], xyz, self._upright)
+                positions[person.name] = np.array(xy)
+                xyz = (xy[0], xy[1], 0.0)  # body frames sit on the floor
+            if xyz != self._placed[person.name]:
+                self._bullet.resetBasePositionAndOrientation(
+                    self._ids[person.name], xyz, self._upright
+                )
+                self._placed[person.name] = xyz
         return positions

@@ -7,8 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from robots.follower import ChainedFormFollower, FollowerParams
+from robots.follower import ChainedFormFollower, FollowerParams, _wrap
 from robots.path import SplinePath
+from semistatic.frames import wrap_angle
+from tests.robots.follower_reference import ArrayPathFollower
 
 DT = 0.02
 NO_LIMITS = {
@@ -279,3 +281,25 @@ def test_bad_command_arguments_are_rejected():
         follower.command([0.0, 0.0, 0.0], 0.0)
     with pytest.raises(ValueError, match=r"speed_scale must be in \[0, 1\]"):
         follower.command([0.0, 0.0, 0.0], DT, speed_scale=1.5)
+
+
+def test_float_wrap_is_wrap_angle_to_the_last_bit():
+    angles = np.random.default_rng(0).normal(0.0, 10.0, 2000)
+    specials = [0.0, -0.0, math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 3 * math.pi, 1e-300]
+    for angle in [*angles.tolist(), *specials, math.nextafter(math.pi, 4.0)]:
+        assert _wrap(angle) == wrap_angle(angle)
+
+
+def test_commands_match_a_follower_on_the_array_path_queries():
+    # The follower's float fast paths (projection, pose, curvature, wrap) must not change a
+    # single command: drive a noisy closed loop against the array-path arithmetic.
+    rng = np.random.default_rng(4)
+    fast = ChainedFormFollower(CURVE)
+    reference = ArrayPathFollower(CURVE.knots)
+    pose = np.array([0.0, 0.1, 0.05])
+    for tick in range(600):
+        scale = 0.0 if 200 <= tick < 220 else 1.0  # a safety stop on the way
+        command = fast.command(pose, DT, speed_scale=scale)
+        assert command == reference.command(pose, DT, speed_scale=scale)
+        assert fast.progress == reference.progress
+        pose = unicycle_step(pose, *command, DT) + rng.normal(0.0, 0.003, 3)

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from robots import landmarks as landmarks_module
 from robots.landmarks import (
     CHI2_2DOF_99,
     LandmarkObservation,
@@ -15,6 +16,9 @@ from robots.landmarks import (
 )
 from semistatic.frames import compose, transform_points, wrap_angle
 from semistatic.types import Scan
+from tests.robots.landmarks_reference import _centre_bearing as reference_centre_bearing
+from tests.robots.landmarks_reference import _centre_range as reference_centre_range
+from tests.robots.landmarks_reference import detect_landmarks_reference
 
 POST_RADIUS = 0.04
 POST_REMISSION = 0.95
@@ -379,3 +383,101 @@ def test_association_of_nothing_is_empty():
     assert associate_landmarks([], [[1.0, 0.0]], np.zeros(3), np.eye(3)) == []
     obs = observe(np.zeros(3), [[1.0, 0.0]])
     assert associate_landmarks(obs, np.zeros((0, 2)), np.zeros(3), np.eye(3)) == []
+
+
+# ---------------------------------------------------- batched detection vs the reference
+
+# Relative agreement of the batched estimates with the per-group reference: they differ
+# only in the rounding of sums (padding changes numpy's pairwise order, the angle
+# difference identities replace sin(a - b)); the observed worst case is ~2e-13.
+BATCH_RTOL = 1e-11
+
+
+def reference_scenes():
+    """The scans of the tests above: random rooms at three noise levels and the specials."""
+    rng = np.random.default_rng(42)
+    for range_sigma in (0.0, 0.005, 0.012):
+        for _ in range(25):
+            posts, pose = random_scene(rng, num_posts=8)
+            yield cast_scan(pose, posts, ROOM, range_sigma=range_sigma, rng=rng), range_sigma
+    yield cast_scan((0.0, 0.0, 0.0), [(2.0, 0.0), (5.0, 0.1)], ROOM), 0.0
+    strip = [((3.0, -0.5), (3.0, 0.5))]
+    yield cast_scan((0.0, 0.0, 0.0), [(2.0, 2.0)], ROOM, reflective_walls=strip), 0.0
+    # A post at arm's length covers ~20 beams beside far ones with 1-2: ragged groups.
+    yield cast_scan((0.0, 0.0, 0.0), [(0.3, 0.0), (6.0, 2.0), (8.0, -3.0)], ROOM), 0.0
+
+
+def test_batched_detection_returns_the_reference_observations():
+    checked = 0
+    for scan, range_sigma in reference_scenes():
+        for kwargs in ({"range_sigma": max(range_sigma, 1e-3)}, {"range_sigma": 0.0}):
+            fast = detect_landmarks(scan, **kwargs)
+            slow = detect_landmarks_reference(scan, **kwargs)
+            assert len(fast) == len(slow)
+            for ours, theirs in zip(fast, slow, strict=True):
+                np.testing.assert_array_equal(ours.beam_indices, theirs.beam_indices)
+                assert ours.range == pytest.approx(theirs.range, rel=BATCH_RTOL)
+                assert ours.bearing == pytest.approx(theirs.bearing, rel=0, abs=BATCH_RTOL)
+                scale = np.max(np.abs(theirs.covariance))
+                np.testing.assert_allclose(
+                    ours.covariance, theirs.covariance, rtol=0, atol=BATCH_RTOL * scale
+                )
+                checked += 1
+    assert checked > 300
+
+
+def test_min_beams_and_an_empty_bearing_interval_match_the_reference():
+    # A one-beam post: its feasible bearing interval collapses to a point (zero variance).
+    scan = cast_scan((0.0, 0.0, 0.0), [(8.0, 0.0), (3.0, 1.0)], ROOM)
+    for min_beams in (1, 2, 5):
+        fast = detect_landmarks(scan, min_beams=min_beams, range_sigma=0.0)
+        slow = detect_landmarks_reference(scan, min_beams=min_beams, range_sigma=0.0)
+        assert [o.beam_indices.tolist() for o in fast] == [o.beam_indices.tolist() for o in slow]
+        for ours, theirs in zip(fast, slow, strict=True):
+            assert (ours.range, ours.bearing) == pytest.approx((theirs.range, theirs.bearing))
+    assert len(detect_landmarks(scan, min_beams=1)) > len(detect_landmarks(scan, min_beams=5))
+
+
+def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_groups():
+    # Groups of 1 to 17 beams in one batch (padding), one with an empty interval.
+    rng = np.random.default_rng(9)
+    sizes = [1, 3, 17, 6, 2]
+    hit_ranges, hit_angles = [], []
+    for size in sizes:
+        centre = rng.uniform(-2.0, 2.0)
+        hit_angles.append(centre + 0.008 * (np.arange(size) - (size - 1) / 2))
+        hit_ranges.append(rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size))
+    lows = np.array([angles[-1] - 0.01 for angles in hit_angles])
+    highs = lows + rng.uniform(0.0, 0.02, len(sizes))
+    highs[3] = lows[3]  # an interval that collapsed to a point
+    mask = np.zeros((len(sizes), max(sizes)), dtype=bool)
+    ranges = np.ones(mask.shape)
+    angles = np.zeros(mask.shape)
+    for row, size in enumerate(sizes):
+        mask[row, :size] = True
+        ranges[row, :size], angles[row, :size] = hit_ranges[row], hit_angles[row]
+    hits = landmarks_module._Hits(ranges, angles, mask)
+    bearing, bearing_variance = landmarks_module._centre_bearings(
+        hits, lows, highs, POST_RADIUS, 0.012
+    )
+    distance, range_variance, cross = landmarks_module._centre_ranges(
+        hits, bearing, POST_RADIUS, 0.012, bearing_variance + 1e-6
+    )
+    for row in range(len(sizes)):
+        mean, variance = reference_centre_bearing(
+            hit_ranges[row], hit_angles[row], lows[row], highs[row], POST_RADIUS, 0.012
+        )
+        assert bearing[row] == pytest.approx(mean, rel=0, abs=1e-12)
+        assert bearing_variance[row] == pytest.approx(variance, rel=1e-9, abs=1e-18)
+        expected = reference_centre_range(
+            hit_ranges[row],
+            hit_angles[row] - bearing[row],
+            POST_RADIUS,
+            0.012,
+            bearing_variance[row] + 1e-6,
+        )
+        assert (distance[row], range_variance[row], cross[row]) == pytest.approx(
+            expected, rel=1e-11
+        )
+    assert bearing_variance[3] == 0.0
+    assert bearing[3] == lows[3]

@@ -268,3 +268,72 @@ def test_knot_interval_maps_arc_length_to_segments():
     assert path.knot_interval(-1.0) == 0
     assert path.knot_interval(path.length + 1.0) == 3
     assert isinstance(path.knot_interval(1.0), int)
+
+
+# ------------------------------------------------- scalar fast paths (one point, one s)
+
+HAIRPIN = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 0.2], [0.0, 0.2]])
+FAST_PATH_SETS = {**KNOT_SETS, "hairpin": HAIRPIN}
+
+
+def poses_near(path: SplinePath, rng: np.random.Generator, count: int, spread: float):
+    """Seeded points around the path with a progress hint near their arc length."""
+    s = rng.uniform(0.0, path.length, count)
+    points = path.point(s) + rng.normal(0.0, spread, (count, 2))
+    hints = s + rng.normal(0.0, 0.1, count)
+    return points, hints
+
+
+@pytest.mark.parametrize("name", sorted(FAST_PATH_SETS))
+def test_one_point_projection_is_the_array_projection_to_the_last_bit(name):
+    # The scalar path transcribes the array path (same seeds, brackets, iterations), so
+    # its result must not differ at all, with or without a hint, even on the hairpin
+    # where three basins compete.
+    path = SplinePath(FAST_PATH_SETS[name])
+    points, hints = poses_near(path, np.random.default_rng(11), 200, 0.3)
+    for point, hint in zip(points, hints, strict=True):
+        assert path.project(point) == path.project(point[None, :])[0]
+        for window in (0.05, 0.3, 1.0):
+            fast = path.project(point, s_hint=float(hint), window=window)
+            array = path.project(point[None, :], s_hint=float(hint), window=window)[0]
+            assert fast == array
+            assert isinstance(fast, float)
+
+
+@pytest.mark.parametrize("name", sorted(KNOT_SETS))
+def test_tracking_projection_equals_the_full_projection_near_the_path(name):
+    # A robot near the path, tracked with the follower's hint and window: the local
+    # search finds the same closest point as the search over the whole path.
+    path = SplinePath(KNOT_SETS[name])
+    points, hints = poses_near(path, np.random.default_rng(5), 300, 0.05)
+    tracked = np.array(
+        [path.project(p, s_hint=float(h), window=1.0) for p, h in zip(points, hints, strict=True)]
+    )
+    np.testing.assert_allclose(tracked, path.project(points), rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(FAST_PATH_SETS))
+def test_scalar_queries_are_the_array_queries_to_the_last_bit(name):
+    # A 0-d array takes the array path: the float path must reproduce it exactly.
+    path = SplinePath(FAST_PATH_SETS[name])
+    s_values = np.random.default_rng(2).uniform(-0.5, path.length + 0.5, 300)
+    s_values[:4] = [0.0, path.length, *path.knot_s[1:2], -0.0]
+    for s in s_values.tolist():
+        zero_d = np.array(s)
+        assert path.pose(s).tolist() == path.pose(zero_d).tolist()
+        assert path.heading(s) == path.heading(zero_d)
+        assert path.curvature(s) == path.curvature(zero_d)
+        assert isinstance(path.curvature(s), float)
+    # Batches agree too, up to numpy's array power rounding (1 ulp) in the curvature.
+    batch = np.array([path.curvature(s) for s in s_values.tolist()])
+    np.testing.assert_allclose(batch, path.curvature(s_values), rtol=1e-15, atol=1e-15)
+    assert path.pose(3).tolist() == path.pose(np.array(3.0)).tolist()  # ints too
+
+
+def test_scalar_queries_of_non_finite_s_take_the_array_path():
+    path = SplinePath(KNOT_SETS["l_turn"])
+    np.testing.assert_allclose(path.pose(np.inf), path.pose(path.length))
+    assert path.curvature(-np.inf) == path.curvature(0.0)
+    assert path.pose(np.nan).shape == (3,)  # nan does not crash the float path's search
+    with pytest.raises(ValueError, match="finite"):
+        path.project([np.nan, 0.0], s_hint=1.0)

@@ -6,10 +6,13 @@ import numpy as np
 import pytest
 
 from robots.lasers import S300
+from robots.presets import PIONEER3DX
 from sim.client import SimClient
+from sim.contacts import ContactMonitor
 from sim.ground_truth import people_positions
 from sim.laser import RaycastLaser
-from sim.people import PARKED_Z, People, person_position
+from sim.people import PARKED_Z, People, _Walk, person_position
+from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from tests.sim.random_scenes import simple_path
 from worlds.spec import PersonSpec, WorldSpec
@@ -101,3 +104,102 @@ def test_lasers_see_a_present_person_and_not_a_parked_one():
         people.update(2.0)  # at (2, 0): the beam straight ahead meets its front at 1.75 m
         ranges = laser.scan((0.0, 0.0, 0.2, 0.0)).ranges
     assert ranges[S300.num_beams // 2] == pytest.approx(2.0 - walker.radius, abs=1e-5)
+
+
+# ------------------------------------------- the per-step fast path and skipped teleports
+
+ROUTES = {
+    "l_route": PersonSpec("p", L_ROUTE, speed=1.3, start_time=0.7),
+    "loop": PersonSpec("p", L_ROUTE, speed=0.9, loop=True),
+    "single": PersonSpec("p", ((2.0, 1.0),)),
+    "repeated": PersonSpec("p", ((0.0, 0.0), (1.0, 0.0), (1.0, 0.0), (1.0, 1.0))),
+    "closed_loop": PersonSpec("p", ((0.0, 0.0), (1.0, 0.0), (0.0, 0.0)), loop=True),
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROUTES))
+def test_precomputed_walk_is_person_position_to_the_last_bit(name):
+    person = ROUTES[name]
+    walk = _Walk(person)
+    times = [*np.random.default_rng(1).uniform(-1.0, 40.0, 500).tolist(), 0.0, 0.7, 12.0]
+    for t in times:
+        expected = person_position(person, t)
+        if expected is None:
+            assert walk.position(t) is None
+        else:
+            assert list(walk.position(t)) == expected.tolist()
+
+
+class CountingBullet:
+    """Forward to a BulletClient, counting the teleports."""
+
+    def __init__(self, bullet):
+        self.bullet, self.teleports = bullet, 0
+
+    def __getattr__(self, name):
+        return getattr(self.bullet, name)
+
+    def resetBasePositionAndOrientation(self, *args):  # PyBullet's name
+        self.teleports += 1
+        return self.bullet.resetBasePositionAndOrientation(*args)
+
+
+def test_bodies_are_teleported_only_when_their_position_changes():
+    walker = PersonSpec("w", ((0.0, 2.0), (1.0, 2.0)), speed=1.0, start_time=1.0)
+    with SimClient() as sim:
+        people = People(SimWorld(sim, world_with(walker)))
+        counting = people._bullet = CountingBullet(sim.bullet)
+        people.update(0.0)  # first update: parked
+        people.update(0.5)  # still parked: no engine call
+        assert counting.teleports == 1
+        people.update(1.5)
+        people.update(2.5)  # arrived at the end
+        people.update(3.5)
+        people.update(90.0)
+        assert counting.teleports == 3
+        (x, y, z), _ = sim.bullet.getBasePositionAndOrientation(people._ids["w"])
+        assert (x, y, z) == pytest.approx((1.0, 2.0, 0.0))
+        people.update(100.0, lap_start=100.0)  # a new lap: parked again
+        assert counting.teleports == 4
+
+
+def test_skipping_unchanged_teleports_leaves_the_physics_bit_identical():
+    # A robot pushes into a person standing at the end of their walk; the reference
+    # teleports every person at every step, as People did before it skipped no-ops.
+    walker = PersonSpec("w", ((1.5, 2.0), (1.5, 0.0)), speed=2.0, start_time=0.2)
+
+    def drive(update_people):
+        with SimClient() as sim:
+            world = SimWorld(sim, world_with(walker))
+            robot = SimUGV(sim, PIONEER3DX, (0.0, 0.0, 0.0))
+            contacts = ContactMonitor(sim, robot.body_id, world)
+            update = update_people(sim, world)
+            robot.command(0.6, 0.0)
+            poses = []
+            for step in range(720):
+                update(step * sim.time_step)
+                sim.step()
+                contacts.check()
+                poses.append(robot.true_pose())
+            return np.array(poses), contacts.collisions
+
+    def fast(sim, world):
+        return People(world).update
+
+    def every_step(sim, world):
+        upright = sim.bullet.getQuaternionFromEuler([0.0, 0.0, 0.0])
+
+        def update(t):
+            for person in world.people:
+                xy = person_position(person, t)
+                xyz = [*person.waypoints[0], PARKED_Z] if xy is None else [*xy.tolist(), 0.0]
+                sim.bullet.resetBasePositionAndOrientation(
+                    world.person_id(person.name), xyz, upright
+                )
+
+        return update
+
+    poses, collisions = drive(fast)
+    reference_poses, reference_collisions = drive(every_step)
+    assert collisions == reference_collisions == 1  # the robot did run into the person
+    assert np.array_equal(poses, reference_poses)
