@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test run bench lint clean
+.PHONY: install test run bench accuracy lint clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -28,7 +28,10 @@ run: install
 	$(VENV)/bin/semistatic run sim1 --compare --out $(OUT)/sim1
 
 bench: install
-	$(PY) -m pytest -q -m bench benchmarks
+	$(PY) -m pytest -q -s -m bench benchmarks
+
+accuracy: install
+	$(PY) -m pytest -q -m accuracy tests/scenarios/test_accuracy.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache .hypothesis

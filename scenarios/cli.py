@@ -69,6 +69,10 @@ def _parser() -> argparse.ArgumentParser:
     table.add_argument("--laps", type=int, help="laps per scenario (overrides the files)")
     table.add_argument("--jobs", type=int, default=1, help="scenarios run in parallel")
     table.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    table.add_argument(
+        "--compare", action="store_true",
+        help="also run each scenario with adaptive fields and compare lap times",
+    )
     return parser
 
 
@@ -164,13 +168,17 @@ def _run_summary(metrics: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
-def _table_job(name: str, laps: int | None, out: Path, figures: bool) -> dict:
-    from scenarios.outputs import write_outputs
+def _table_job(name: str, laps: int | None, out: Path, figures: bool, compare: bool) -> dict:
+    from scenarios.outputs import summarize, write_outputs
     from scenarios.runner import run_scenario
 
     overrides = [f"laps={laps}"] if laps is not None else []
     spec, _ = _load(name, overrides)
-    return write_outputs(run_scenario(spec), out / name, figures=figures)
+    comparison = None
+    if compare:
+        other = "adaptive" if spec.policy == "conservative" else "conservative"
+        comparison = summarize(run_scenario(dataclasses.replace(spec, policy=other)))
+    return write_outputs(run_scenario(spec), out / name, figures=figures, comparison=comparison)
 
 
 def _table(args: argparse.Namespace) -> int:
@@ -186,7 +194,9 @@ def _table(args: argparse.Namespace) -> int:
     results: dict[str, dict] = {}
     with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = {
-            pool.submit(_table_job, name, args.laps, args.out, not args.no_figures): name
+            pool.submit(
+                _table_job, name, args.laps, args.out, not args.no_figures, args.compare
+            ): name
             for name in names
         }
         done = concurrent.futures.as_completed(futures)

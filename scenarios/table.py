@@ -20,7 +20,7 @@ from typing import Any
 
 from scenarios.outputs import PAPER_TABLE1, TABLE1_COLUMNS
 
-__all__ = ["render_table", "table_rows", "write_table"]
+__all__ = ["comparison_rows", "render_table", "table_rows", "write_table"]
 
 HEADER = ("environment", "source", "mean avg", "mean min", "mean max", "std avg", "std min",
           "std max")
@@ -47,18 +47,47 @@ def _cell(value: Any) -> str:
     return f"{value:.2f}" if isinstance(value, float) else str(value)
 
 
-def render_table(results: Mapping[str, Mapping[str, Any]]) -> str:
-    """Return the side-by-side table as aligned text."""
-    rows = [HEADER, *[tuple(_cell(v) for v in row) for row in table_rows(results)]]
-    widths = [max(len(row[i]) for row in rows) for i in range(len(HEADER))]
-    lines = []
-    for row in rows:
-        cells = [
-            cell.ljust(width) if i < 2 else cell.rjust(width)
+COMPARISON_HEADER = ("scenario", "conservative s", "adaptive s", "saved %", "stops cons.",
+                     "stops adapt.")
+
+
+def _aligned(header: tuple[str, ...], rows: list[tuple[Any, ...]], text_columns: int) -> list[str]:
+    cells = [header, *[tuple(_cell(v) for v in row) for row in rows]]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
+    return [
+        "  ".join(
+            cell.ljust(width) if i < text_columns else cell.rjust(width)
             for i, (cell, width) in enumerate(zip(row, widths, strict=True))
-        ]
-        lines.append("  ".join(cells).rstrip())
+        ).rstrip()
+        for row in cells
+    ]
+
+
+def render_table(results: Mapping[str, Mapping[str, Any]]) -> str:
+    """Return the side-by-side table (and the policy comparison, if run) as aligned text."""
+    lines = _aligned(HEADER, table_rows(results), text_columns=2)
+    comparison = comparison_rows(results)
+    if comparison:
+        lines += ["", *_aligned(COMPARISON_HEADER, comparison, text_columns=1)]
     return "\n".join(lines)
+
+
+def comparison_rows(results: Mapping[str, Mapping[str, Any]]) -> list[tuple[Any, ...]]:
+    """Return ``(scenario, conservative s, adaptive s, saved %, stops c, stops a)`` rows."""
+    rows = []
+    for name, metrics in results.items():
+        pair = metrics.get("policy_comparison")
+        if pair is None:
+            continue
+        rows.append((
+            name,
+            round(sum(pair["conservative"]["lap_time_s"]), 1),
+            round(sum(pair["adaptive"]["lap_time_s"]), 1),
+            pair["total_time_saved_percent"],
+            pair["conservative"]["stops"],
+            pair["adaptive"]["stops"],
+        ))
+    return rows
 
 
 def _markdown(results: Mapping[str, Mapping[str, Any]]) -> str:
@@ -68,6 +97,15 @@ def _markdown(results: Mapping[str, Mapping[str, Any]]) -> str:
     ]
     for row in table_rows(results):
         lines.append("| " + " | ".join(_cell(v) for v in row) + " |")
+    comparison = comparison_rows(results)
+    if comparison:
+        lines += [
+            "",
+            "| scenario | conservative total (s) | adaptive total (s) | saved (%) "
+            "| stops conservative | stops adaptive |",
+            "|---|---:|---:|---:|---:|---:|",
+        ]
+        lines += ["| " + " | ".join(_cell(v) for v in row) + " |" for row in comparison]
     return "\n".join(lines) + "\n"
 
 

@@ -21,13 +21,43 @@ Examples
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import TracebackType
 
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
+_LIBC = ctypes.CDLL(None)
+
+
+@contextmanager
+def quiet_stdout() -> Iterator[None]:
+    """Silence what PyBullet's C library prints straight to file descriptor 1.
+
+    It writes its build time on import and ``argv[0]=`` on every connection, which would
+    clutter the command line's output and any stdout a caller parses.
+    """
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no real stdout (e.g. a closed descriptor): nothing to protect
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            yield
+    finally:
+        _LIBC.fflush(None)  # C stdio buffers what it printed: flush it into /dev/null
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+with quiet_stdout():
+    import pybullet
+    from pybullet_utils.bullet_client import BulletClient
 
 __all__ = ["DEFAULT_TIME_STEP", "GRAVITY", "SimClient"]
 
@@ -95,7 +125,8 @@ class SimClient:
         self.engine_time_s = 0.0
         self._steps = 0
         self._closed = False
-        self.bullet = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        with quiet_stdout():
+            self.bullet = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         self.bullet.setGravity(0.0, 0.0, -float(gravity))
         # Fixed stepping with no sub-steps, and overlapping pairs processed in a fixed
         # order: with the same calls in the same order two servers give identical states.
