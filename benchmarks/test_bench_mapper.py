@@ -2,12 +2,14 @@
 
 One 541-beam scan (270 deg, 0.5 deg, 1 cm noise) of 14 boxes and 6 wall panels around
 the sensor against a map of their 20 polylines, built from the first scans. Prints the
-median per update and the split by stage. Run with
+median per update and the split by stage, with the Python-float fast paths for small
+polylines and again in the same run without them. Run with
 ``.venv/bin/python -m pytest -m bench benchmarks/test_bench_mapper.py -s``.
 """
 
 from __future__ import annotations
 
+import importlib
 import math
 import time
 
@@ -16,6 +18,11 @@ import pytest
 
 from semistatic.mapper import PolylineMap
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
+
+# The package re-exports functions named like these modules: import the modules by name.
+hausdorff_module = importlib.import_module("semistatic.hausdorff")
+similarity_module = importlib.import_module("semistatic.similarity")
+merge_module = importlib.import_module("semistatic.merge")
 
 SCANS = 300
 STAGES = ("extract", "associate", "merge", "join", "life_cycle")
@@ -41,17 +48,8 @@ def hall() -> np.ndarray:
     return scene(*parts)
 
 
-@pytest.mark.bench
-def test_mapper_update_time():
-    rng = np.random.default_rng(0)
-    segments = hall()
-    base = np.zeros(3)
-    steps = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02], (SCANS, 3))
-    poses = [base + step for step in steps]
-    scans = [
-        cast_scan(segments, pose, noise=0.01, rng=rng, stamp=0.08 * k)
-        for k, pose in enumerate(poses)
-    ]
+def _measure(scans, poses):
+    """Return the map size, the last report, the update times and the per-stage times."""
     mapper = PolylineMap()
     for scan, pose in zip(scans[:3], poses[:3], strict=True):
         mapper.update(scan, pose)
@@ -64,13 +62,43 @@ def test_mapper_update_time():
         totals.append(time.perf_counter() - start)
         for stage in STAGES:
             stages[stage].append(timings.get(stage, 0.0))
+    assert len(mapper) == polylines
+    return polylines, report, totals, stages
+
+
+def _summary(label, totals, stages):
     median_ms = 1e3 * float(np.median(totals))
     split = ", ".join(f"{stage} {1e3 * float(np.median(stages[stage])):.3f}" for stage in STAGES)
+    return (
+        f"{label}: median {median_ms:.3f} ms (p90 {1e3 * float(np.percentile(totals, 90)):.3f} "
+        f"ms); by stage (ms): {split}"
+    )
+
+
+@pytest.mark.bench
+def test_mapper_update_time(monkeypatch):
+    rng = np.random.default_rng(0)
+    segments = hall()
+    base = np.zeros(3)
+    steps = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02], (SCANS, 3))
+    poses = [base + step for step in steps]
+    scans = [
+        cast_scan(segments, pose, noise=0.01, rng=rng, stamp=0.08 * k)
+        for k, pose in enumerate(poses)
+    ]
+    polylines, report, totals, stages = _measure(scans, poses)
+    # The same run with the Python-float fast paths off (numpy branch and bound, numpy
+    # tangent functions, GEOS for every merge simplification): what they buy.
+    monkeypatch.setattr(hausdorff_module, "PYTHON_PAIRS", 0)
+    monkeypatch.setattr(similarity_module, "PYTHON_VERTICES", 0)
+    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
+    _, _, slow_totals, slow_stages = _measure(scans, poses)
     print(
         f"\nmapper update, {polylines} map polylines, {len(report.scan_polylines)} scan "
-        f"polylines, {len(report.associated)} pairs: median {median_ms:.3f} ms "
-        f"(p90 {1e3 * float(np.percentile(totals, 90)):.3f} ms); by stage (ms): {split}"
+        f"polylines, {len(report.associated)} pairs\n"
+        + _summary("fast paths", totals, stages)
+        + "\n"
+        + _summary("vectorised paths only", slow_totals, slow_stages)
     )
     assert polylines == 20
-    assert len(mapper) == 20
-    assert math.isfinite(median_ms)
+    assert math.isfinite(float(np.median(totals)))

@@ -26,6 +26,11 @@ are left out of the recursion: they could only add pairs the gate rejects, and w
 them the recursion runs over the candidates only (a map of a whole building costs no
 more than the part in view).
 
+Since one ``FAR_COST`` outweighs the similarities of any path, the gate alone often fixes
+the optimal path (each polyline near only its own counterpart): then no similarity is
+computed at all (:func:`_forced_path` proves it with a bound on the similarities), and
+the validation stops each restricted Hausdorff distance as soon as it exceeds the gate.
+
 Examples
 --------
 >>> wall = np.array([[2.0, -1.0], [2.0, 1.0]])
@@ -38,6 +43,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 
@@ -45,7 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.frames import wrap_angle
-from semistatic.hausdorff import restricted_hausdorff
+from semistatic.hausdorff import _restricted_distance
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.similarity import similarity
 
@@ -149,7 +155,8 @@ def orient_ccw(polyline: Polyline | ArrayLike, viewpoint: ArrayLike) -> Polyline
 
 
 def _reversed(polyline: Polyline) -> Polyline:
-    return Polyline(polyline.points[::-1], polyline.scan_indices[::-1])
+    # Views of valid read-only arrays: nothing to check or copy.
+    return Polyline._trusted(polyline.points[::-1], polyline.scan_indices[::-1])
 
 
 def _ccw_summary(
@@ -262,27 +269,33 @@ def _optimal_path(costs: np.ndarray) -> list[tuple[int, int]]:
     On equal totals the diagonal step wins (a one-to-one pair), then the step that keeps
     the map polyline, then the one that keeps the scan polyline.
     """
-    n, m = costs.shape
-    cost = costs.tolist()
-    total = [[0.0] * m for _ in range(n)]
-    step = [[0] * m for _ in range(n)]  # 0 diagonal, 1 from (i - 1, j), 2 from (i, j - 1)
-    for i in range(n):
-        row, previous, cost_row, step_row = total[i], total[i - 1], cost[i], step[i]
-        for j in range(m):
-            if i == 0 and j == 0:
-                best, move = 0.0, 0
-            elif i == 0:
-                best, move = row[j - 1], 2
-            elif j == 0:
+    path, _ = _dtw(costs.tolist())
+    return path
+
+
+def _dtw(cost: list[list[float]]) -> tuple[list[tuple[int, int]], list[list[float]]]:
+    """Return the path of :func:`_optimal_path` and the table of optimal totals."""
+    n, m = len(cost), len(cost[0])
+    # 0 diagonal, 1 from (i - 1, j), 2 from (i, j - 1); the first row only comes from the left.
+    previous = list(itertools.accumulate(cost[0]))
+    totals = [previous]
+    step = [[0] + [2] * (m - 1)]
+    for i in range(1, n):
+        cost_row = cost[i]
+        left = previous[0] + cost_row[0]
+        row, moves = [left], [1]
+        for j in range(1, m):
+            best, move = previous[j - 1], 0
+            if previous[j] < best:
                 best, move = previous[j], 1
-            else:
-                best, move = previous[j - 1], 0
-                if previous[j] < best:
-                    best, move = previous[j], 1
-                if row[j - 1] < best:
-                    best, move = row[j - 1], 2
-            row[j] = best + cost_row[j]
-            step_row[j] = move
+            if left < best:
+                best, move = left, 2
+            left = best + cost_row[j]
+            row.append(left)
+            moves.append(move)
+        previous = row
+        totals.append(row)
+        step.append(moves)
     path = []
     i, j = n - 1, m - 1
     while True:
@@ -297,7 +310,70 @@ def _optimal_path(costs: np.ndarray) -> list[tuple[int, int]]:
         else:
             j -= 1
     path.reverse()
-    return path
+    return path, totals
+
+
+def _is_unique(path: list[tuple[int, int]], totals: list[list[float]]) -> bool:
+    """Return whether no other path reaches the end of ``path`` with the same total.
+
+    Another optimal path would leave this one, walking back from the end, at a cell where
+    two predecessors tie for the best total.
+    """
+    for i, j in path[1:]:
+        before = [
+            totals[a][b] for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)) if a >= 0 and b >= 0
+        ]
+        if before.count(min(before)) > 1:
+            return False
+    return True
+
+
+def _length(polyline: Polyline) -> float:
+    """Return the arc length (m) of a polyline with Python floats."""
+    rows = polyline.points.tolist()
+    return sum(map(math.dist, rows, rows[1:]))
+
+
+def _forced_path(
+    feasible: np.ndarray, scans: list[Polyline], maps: list[Polyline]
+) -> list[tuple[int, int]] | None:
+    """Return the association path when the similarities cannot change it, else ``None``.
+
+    A pair that cannot pass the gate or has no shape (zero length) costs ``FAR_COST``; any
+    other costs its similarity, the integral of eq. (1) times the length ratio. That
+    integral is a variance, at most a quarter of the squared range of ``T1 - T0``, which
+    is at most ``pi`` per turn of either polyline: less than ``((N0 + N1) pi)^2 / 4`` for
+    ``N0`` and ``N1`` vertices (eight times that is used, far clear of any rounding).
+    When a single path has the fewest ``FAR_COST`` pairs, every other path costs at least
+    one ``FAR_COST`` more; if the bounds along that path add up to less than ``FAR_COST``,
+    it is the optimal path of eq. (5) whatever the similarities are, and none needs to be
+    computed (for a map in view, usually all of them).
+    """
+    scan_lengths = [_length(line) for line in scans]
+    map_lengths = [_length(line) for line in maps]
+    shaped = all(scan_lengths) and all(map_lengths)
+    if (
+        shaped
+        and feasible.shape[0] == feasible.shape[1]
+        and np.array_equal(feasible, np.eye(feasible.shape[0], dtype=bool))
+    ):
+        # Each polyline near exactly its counterpart in the same order (the usual case): the
+        # diagonal is the only path without a FAR_COST pair.
+        path = [(k, k) for k in range(feasible.shape[0])]
+    else:
+        hard = ~feasible
+        if not shaped:
+            hard |= (np.array(scan_lengths) == 0.0)[:, None] | (np.array(map_lengths) == 0.0)
+        path, totals = _dtw(hard.astype(np.float64).tolist())
+        if not _is_unique(path, totals):
+            return None
+    bound = 0.0
+    near = feasible.tolist()
+    for a, b in path:
+        if near[a][b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
+            ratio = max(scan_lengths[a] / map_lengths[b], map_lengths[b] / scan_lengths[a])
+            bound += 2.0 * ((len(scans[a]) + len(maps[b])) * math.pi) ** 2 * ratio
+    return path if bound < FAR_COST else None
 
 
 def associate_with_distances(
@@ -348,17 +424,23 @@ def associate_with_distances(
         # same way round: a map polyline first seen from its other side is reversed.
         ordered = [_reversed(candidates[k]) if clockwise[k] else candidates[k] for k in ranks]
     feasible = near[np.ix_(rows, order)]
-    costs = np.full(feasible.shape, FAR_COST)
-    for a, b in zip(*np.nonzero(feasible), strict=True):
-        value = similarity(scans[rows[a]], ordered[b])
-        if value < FAR_COST:
-            costs[a, b] = value
+    path = _forced_path(feasible, [scans[row] for row in rows], ordered)
+    if path is None:
+        costs = np.full(feasible.shape, FAR_COST)
+        for a, b in zip(*np.nonzero(feasible), strict=True):
+            value = similarity(scans[rows[a]], ordered[b])
+            if value < FAR_COST:
+                costs[a, b] = value
+        path = _optimal_path(costs)
     pairs = []
-    for a, b in _optimal_path(costs):
+    near_pairs = feasible.tolist()
+    for a, b in path:
         scan, candidate = scans[rows[a]], ordered[b]
-        if not feasible[a, b] or len(scan) == 0 or len(candidate) == 0:
+        if not near_pairs[a][b] or len(scan) == 0 or len(candidate) == 0:
             continue
-        distance = restricted_hausdorff(scan, candidate, mode=mode)
+        # Stops early above the gate: the value is then only a lower bound, but one that
+        # fails the gate exactly when the full distance does.
+        distance = _restricted_distance(scan, candidate, mode, limit=gate)
         if distance <= gate:
             pairs.append((rows[a], order[b], float(distance)))
     return pairs

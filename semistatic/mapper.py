@@ -41,7 +41,6 @@ Examples
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -53,9 +52,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
-from semistatic.extraction import extract_polylines
+from semistatic.extraction import _extracted_vertices
 from semistatic.frames import transform_points, untransform_points
-from semistatic.merge import join, merge
+from semistatic.merge import END_TOLERANCE_FACTOR, _merge_rows, join
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
@@ -146,6 +145,18 @@ class MapPolyline:
             if not (isinstance(value, int | np.integer) and value >= 0):
                 raise ValueError(f"MapPolyline.{name} must be an integer >= 0, got {value!r}")
             object.__setattr__(self, name, int(value))
+
+
+def _replaced(entry: MapPolyline, **changes: object) -> MapPolyline:
+    """Return ``dataclasses.replace(entry, **changes)`` without re-validating.
+
+    Only for the update's own changes, which are valid by construction (a polyline, a
+    status from ``STATUSES``, counts >= 0): a map update replaces every entry it touches.
+    """
+    copy = object.__new__(MapPolyline)
+    copy.__dict__.update(entry.__dict__)
+    copy.__dict__.update(changes)
+    return copy
 
 
 @dataclass(frozen=True)
@@ -249,19 +260,6 @@ def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
     return np.where(hit, along_beam, math.inf).min(axis=1)
 
 
-def _half_gap(end: list[float], outward: list[float], beam: float) -> float:
-    """Return half the distance along ``outward`` from ``end`` to the beam at ``beam``."""
-    direction_x, direction_y = math.cos(beam), math.sin(beam)
-    across = direction_x * outward[1] - direction_y * outward[0]
-    if abs(across) <= PARALLEL_TOLERANCE:
-        return 0.0
-    along_edge = (end[0] * direction_y - end[1] * direction_x) / across
-    along_beam = (end[0] * outward[1] - end[1] * outward[0]) / across
-    if along_edge <= 0.0 or along_beam <= 0.0:
-        return 0.0
-    return 0.5 * along_edge
-
-
 def extend_ends(
     polyline: Polyline | ArrayLike,
     angle_increment: float,
@@ -299,26 +297,58 @@ def extend_ends(
            [ 2.    ,  1.022 ]])
     """
     line = as_polyline(polyline)
-    if len(line) < 2:
-        return line
     origin = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    points = line.points.tolist()
-    relative = [[x - origin[0], y - origin[1]] for x, y in points]
-    extended = [list(point) for point in points]
+    return _extended(line, angle_increment, origin[0], origin[1], limit)
+
+
+def _extended(
+    line: Polyline, angle_increment: float, origin_x: float, origin_y: float, limit: float
+) -> Polyline:
+    """Return :func:`extend_ends` of ``line`` seen from ``(origin_x, origin_y)``."""
+    rows, moved = _extended_rows(line.points.tolist(), angle_increment, origin_x, origin_y, limit)
+    return _observed(line, rows, moved)
+
+
+def _observed(line: Polyline, rows: list[list[float]], moved: bool) -> Polyline:
+    """Return ``line`` with the vertex rows of :func:`_extended_rows` (itself if unmoved)."""
+    if not moved:
+        return line
+    # Finite vertices moved by a finite shift: nothing to check.
+    return Polyline._trusted(np.array(rows, dtype=np.float64), line.scan_indices)
+
+
+def _extended_rows(
+    rows: list[list[float]], angle_increment: float, origin_x: float, origin_y: float, limit: float
+) -> tuple[list[list[float]], bool]:
+    """Return :func:`extend_ends` of vertex ``rows`` (a new list) and whether an end moved."""
+    if len(rows) < 2:
+        return rows, False
+    rows = list(rows)
     moved = False
     for end, inner, beam_step in ((0, 1, -angle_increment), (-1, -2, angle_increment)):
-        outward = [relative[end][0] - relative[inner][0], relative[end][1] - relative[inner][1]]
-        norm = math.hypot(*outward)
+        (x, y), (inner_x, inner_y) = rows[end], rows[inner]
+        relative_x, relative_y = x - origin_x, y - origin_y
+        outward_x = relative_x - (inner_x - origin_x)
+        outward_y = relative_y - (inner_y - origin_y)
+        norm = math.hypot(outward_x, outward_y)
         if norm == 0.0:
             continue
-        outward = [outward[0] / norm, outward[1] / norm]
-        beam = math.atan2(relative[end][1], relative[end][0]) + beam_step
-        shift = min(_half_gap(relative[end], outward, beam), limit)
+        outward_x, outward_y = outward_x / norm, outward_y / norm
+        # Where does the neighbouring beam cross the line of the end edge?
+        beam = math.atan2(relative_y, relative_x) + beam_step
+        direction_x, direction_y = math.cos(beam), math.sin(beam)
+        across = direction_x * outward_y - direction_y * outward_x
+        if abs(across) <= PARALLEL_TOLERANCE:
+            continue
+        along_edge = (relative_x * direction_y - relative_y * direction_x) / across
+        along_beam = (relative_x * outward_y - relative_y * outward_x) / across
+        if along_edge <= 0.0 or along_beam <= 0.0:
+            continue
+        shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
         if shift > 0.0:
-            x, y = points[end]
-            extended[end] = [x + shift * outward[0], y + shift * outward[1]]
+            rows[end] = [x + shift * outward_x, y + shift * outward_y]
             moved = True
-    return Polyline(extended, line.scan_indices) if moved else line
+    return rows, moved
 
 
 class BeamCounts(NamedTuple):
@@ -584,8 +614,10 @@ class PolylineMap:
         clock = _StageClock(timings)
         params = self.params
         pose = np.asarray(pose, dtype=float).reshape(3)
+        if not np.isfinite(pose).all():
+            raise ValueError(f"PolylineMap.update: pose must be a finite (x, y, theta), got {pose}")
         stamp = scan.stamp
-        scan_lines = _transformed(extract_polylines(scan, params), pose)
+        scan_lines = _map_frame_polylines(scan, params, pose)
         clock.lap("extract")
 
         ids = list(self._entries)
@@ -613,11 +645,16 @@ class PolylineMap:
             return UpdateReport(stamp, scan_lines, associated, unassociated, missed_ids=missed)
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        observed = tuple(
-            extend_ends(line, scan.angle_increment, viewpoint=pose) for line in scan_lines
+        x, y = pose[:2].tolist()
+        observed = [
+            _extended_rows(line.points.tolist(), scan.angle_increment, x, y, MAX_END_EXTENSION)
+            for line in scan_lines
+        ]
+        changed = self._merge_associated([rows for rows, _ in observed], associated, stamp)
+        new_ids = self._insert_new(
+            {index: _observed(scan_lines[index], *observed[index]) for index in unassociated},
+            stamp,
         )
-        changed = self._merge_associated(observed, associated, stamp)
-        new_ids = self._insert_new(observed, unassociated, stamp)
         changed.update(new_ids)
         clock.lap("merge")
 
@@ -646,9 +683,7 @@ class PolylineMap:
                 del self._entries[map_id]
                 deleted.append(map_id)
             else:
-                self._entries[map_id] = dataclasses.replace(
-                    entry, status="blank", misses=entry.misses + 1
-                )
+                self._entries[map_id] = _replaced(entry, status="blank", misses=entry.misses + 1)
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
@@ -662,18 +697,21 @@ class PolylineMap:
         )
 
     def _merge_associated(
-        self, scan_lines: tuple[Polyline, ...], associated: tuple[Association, ...], stamp: float
+        self, scan_rows: list[list[list[float]]], associated: tuple[Association, ...], stamp: float
     ) -> set[int]:
         by_map: dict[int, list[int]] = {}
         for pair in associated:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
+        epsilon = self.params.epsilon
+        tolerance = END_TOLERANCE_FACTOR * epsilon
         for map_id, scan_indices in by_map.items():
             entry = self._entries[map_id]
             line = entry.polyline
             weight = float(min(entry.hits, MAX_MERGE_WEIGHT))
             for index in scan_indices:
-                line = merge(line, scan_lines[index], self.params.epsilon, map_weight=weight)
-            self._entries[map_id] = dataclasses.replace(
+                # merge() with its checks done once: epsilon > 0 (MapperParams), weight >= 0.
+                line = _merge_rows(line, scan_rows[index], epsilon, weight, tolerance)
+            self._entries[map_id] = _replaced(
                 entry,
                 polyline=line,
                 status="confirmed",
@@ -683,13 +721,11 @@ class PolylineMap:
             )
         return set(by_map)
 
-    def _insert_new(
-        self, scan_lines: tuple[Polyline, ...], unassociated: tuple[int, ...], stamp: float
-    ) -> list[int]:
+    def _insert_new(self, new_lines: Mapping[int, Polyline], stamp: float) -> list[int]:
         new_ids = []
-        for index in unassociated:
-            if self._keep is None or self._keep(scan_lines[index]):
-                new_ids.append(self.add(scan_lines[index], stamp=stamp))
+        for line in new_lines.values():
+            if self._keep is None or self._keep(line):
+                new_ids.append(self.add(line, stamp=stamp))
         return new_ids
 
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
@@ -720,7 +756,7 @@ class PolylineMap:
                 status = "confirmed"
             else:
                 status = survivor.status
-            self._entries[survivor.id] = dataclasses.replace(
+            self._entries[survivor.id] = _replaced(
                 survivor,
                 polyline=line,
                 status=status,
@@ -736,16 +772,16 @@ class PolylineMap:
         return joined
 
 
-def _transformed(lines: list[Polyline], pose: np.ndarray) -> tuple[Polyline, ...]:
-    """Return sensor-frame polylines in the map frame (one transform for all of them)."""
-    if not lines:
-        return ()
-    points = transform_points(pose, np.concatenate([line.points for line in lines]))
-    bounds = np.cumsum([0, *(len(line) for line in lines)]).tolist()
-    return tuple(
-        Polyline(points[start:stop], line.scan_indices)
-        for line, start, stop in zip(lines, bounds[:-1], bounds[1:], strict=True)
-    )
+def _map_frame_polylines(
+    scan: Scan, params: MapperParams, pose: np.ndarray
+) -> tuple[Polyline, ...]:
+    """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame.
+
+    All vertices are moved in one transform, and the polylines are views of that one
+    fresh array of finite points: nothing to check or copy.
+    """
+    vertices, beams, bounds = _extracted_vertices(scan, params)
+    return tuple(Polyline._split(transform_points(pose, vertices), beams, bounds))
 
 
 class _StageClock:

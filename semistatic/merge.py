@@ -42,8 +42,12 @@ import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.association import bounding_boxes, box_gaps
-from semistatic.extraction import douglas_peucker
-from semistatic.hausdorff import restricted_hausdorff
+from semistatic.extraction import (
+    PYTHON_DOUGLAS_PEUCKER,
+    _douglas_peucker_rows,
+    douglas_peucker,
+)
+from semistatic.hausdorff import _restricted_distance
 from semistatic.polyline import Polyline, as_polyline
 
 __all__ = [
@@ -115,6 +119,18 @@ def _distinct(points: np.ndarray) -> np.ndarray:
     if not repeated.any():
         return points
     return points[np.concatenate(([True], ~repeated))]
+
+
+def _distinct_rows(rows: list[list[float]]) -> list[list[float]]:
+    """Return vertex ``rows`` without consecutive repeats (Python floats)."""
+    if len(rows) < 2:
+        return rows
+    # As _distinct: each vertex is compared with the one before it in the input.
+    return [rows[0]] + [
+        row
+        for previous, row in itertools.pairwise(rows)
+        if (row[0] - previous[0]) ** 2 + (row[1] - previous[1]) ** 2 > DUPLICATE_DISTANCE**2
+    ]
 
 
 # Projections inside merge travel as plain lists: (arc, foot, distance, before, after).
@@ -228,30 +244,49 @@ def project_onto(points: ArrayLike, polyline: Polyline | ArrayLike) -> Projectio
     return _project(points, vertices)
 
 
-def _simplified(points: np.ndarray, epsilon: float) -> Polyline:
-    """Return ``points`` simplified with Douglas-Peucker as a new polyline.
+# The scan indices 0..N-1 of merged polylines, one read-only array per N.
+_VERTEX_ORDER: dict[int, np.ndarray] = {}
 
-    GEOS is called directly: it keeps exactly the vertices ``douglas_peucker`` keeps
-    (DESIGN.md detail 3) and costs a few microseconds on the handful of points of a merge,
-    where the vectorised many-section version is tuned for whole scans.
+
+def _polyline(rows: list[list[float]]) -> Polyline:
+    """Wrap finite vertex rows computed here as a polyline (scan indices: vertex order)."""
+    points = np.array(rows, dtype=np.float64).reshape(-1, 2)
+    indices = _VERTEX_ORDER.get(points.shape[0])
+    if indices is None:  # frozen by _trusted, so shared by every polyline of that size
+        indices = _VERTEX_ORDER[points.shape[0]] = np.arange(points.shape[0], dtype=np.int64)
+    return Polyline._trusted(points, indices)
+
+
+def _simplified(rows: list[list[float]], epsilon: float) -> Polyline:
+    """Return vertex ``rows`` simplified with Douglas-Peucker as a new polyline.
+
+    Both ways keep exactly the vertices ``douglas_peucker`` keeps (DESIGN.md detail 3):
+    a merge has a handful of vertices, for which the Python twin of GEOS's recursion is
+    cheapest; GEOS is called directly for more (the vectorised many-section version is
+    tuned for whole scans).
     """
-    if points.shape[0] <= 2:
-        return Polyline(points)
+    if len(rows) <= 2:
+        return _polyline(rows)
+    if len(rows) <= PYTHON_DOUGLAS_PEUCKER:
+        return _polyline([rows[k] for k in _douglas_peucker_rows(rows, epsilon)])
+    points = np.array(rows, dtype=np.float64)
     line = shapely.simplify(shapely.linestrings(points), epsilon, preserve_topology=False)
     kept = shapely.get_coordinates(line)
     if kept.shape[0] < 2:  # GEOS gave up on a degenerate line: do it ourselves
         kept = points[douglas_peucker(points, epsilon)]
-    return Polyline(kept)
+    return _polyline(kept.tolist())
 
 
-def _extend_with_point(vertices: np.ndarray, point: np.ndarray, tolerance: float) -> np.ndarray:
+def _extend_with_point(
+    vertices: list[list[float]], point: list[float], tolerance: float
+) -> list[list[float]]:
     """Return ``vertices`` extended by ``point`` when it lies beyond an end by > tolerance."""
-    _, _, distance, before, after = _found([point.tolist()], vertices.tolist())
+    _, _, distance, before, after = _found([point], vertices)
     if distance[0] > tolerance:
         if before[0]:
-            return np.vstack((point, vertices))
+            return [point, *vertices]
         if after[0]:
-            return np.vstack((vertices, point))
+            return [*vertices, point]
     return vertices
 
 
@@ -317,23 +352,34 @@ def merge(
     tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
     if not tolerance >= 0.0:
         raise ValueError(f"merge: end_tolerance must be >= 0 m, got {end_tolerance!r}")
-    original = as_polyline(map_polyline)
-    old = _distinct(original.points)
-    new = _distinct(as_polyline(scan_polyline).points)
+    scan_rows = as_polyline(scan_polyline).points.tolist()
+    return _merge_rows(as_polyline(map_polyline), scan_rows, epsilon, map_weight, tolerance)
+
+
+def _merge_rows(
+    original: Polyline,
+    scan_rows: list[list[float]],
+    epsilon: float,
+    map_weight: float,
+    tolerance: float,
+) -> Polyline:
+    """Return :func:`merge` of scan vertices given as rows, with checked parameters."""
+    old = _distinct_rows(original.points.tolist())
+    new = _distinct_rows(scan_rows)
     alpha = 1.0 / (1.0 + map_weight) if math.isfinite(map_weight) else 0.0
-    if new.shape[0] == 0:
+    if not new:
         return original
-    if old.shape[0] == 0:
+    if not old:
         return _simplified(new, epsilon)
-    if old.shape[0] == 1 and new.shape[0] == 1:
-        return Polyline(old + alpha * (new - old))
-    if old.shape[0] == 1:
+    if len(old) == 1 and len(new) == 1:
+        (x0, y0), (x1, y1) = old[0], new[0]
+        return _polyline([[x0 + alpha * (x1 - x0), y0 + alpha * (y1 - y0)]])
+    if len(old) == 1:
         # A point has no extent to average: the scan's shape wins, the point may extend it.
         return _simplified(_extend_with_point(new, old[0], tolerance), epsilon)
-    if new.shape[0] == 1:
+    if len(new) == 1:
         return _simplified(_extend_with_point(old, new[0], tolerance), epsilon)
-
-    return _simplified(np.array(_merged(old.tolist(), new.tolist(), alpha, tolerance)), epsilon)
+    return _simplified(_merged(old, new, alpha, tolerance), epsilon)
 
 
 def _merged(
@@ -361,8 +407,10 @@ def _merged(
 
     # Map vertices facing the scan move toward it.
     moved = [
-        toward(vertex, foot) if not (ahead or behind) and distance <= tolerance else vertex
-        for vertex, foot, distance, ahead, behind in zip(
+        [x + alpha * (foot_x - x), y + alpha * (foot_y - y)]
+        if not (ahead or behind) and distance <= tolerance
+        else [x, y]
+        for (x, y), (foot_x, foot_y), distance, ahead, behind in zip(
             old, scan_feet, scan_distances, scan_before, scan_after, strict=True
         )
     ]
@@ -370,7 +418,7 @@ def _merged(
     inserted = [not (ahead or behind) for ahead, behind in zip(before, after, strict=True)]
     count = len(new)
     prepend, append = 0, 0
-    map_arcs = [0.0, *itertools.accumulate(math.dist(a, b) for a, b in itertools.pairwise(old))]
+    map_arcs = [0.0, *itertools.accumulate(map(math.dist, old, old[1:]))]
 
     # Start: by how much does the scan reach beyond the map's start?
     reach = distances[0] if before[0] else -arcs[0]
@@ -387,18 +435,23 @@ def _merged(
         moved[-1] = toward(old[-1], new[-1])
         inserted[-1] = False
 
-    # Map vertices first on equal arc length, then scan vertices in scan order.
-    middle = [(map_arcs[k], 0, k, vertex) for k, vertex in enumerate(moved)]
-    middle += [(arcs[k], 1, k, toward(feet[k], new[k])) for k in range(count) if inserted[k]]
-    middle.sort(key=lambda item: item[:3])
+    # Map vertices first on equal arc length, then scan vertices in scan order: the keys
+    # (arc, 0 or 1, index) are unique, so the vertices themselves are never compared.
+    middle = [((map_arcs[k], 0, k), vertex) for k, vertex in enumerate(moved)]
+    middle += [
+        ((arcs[k], 1, k), [foot_x + alpha * (x - foot_x), foot_y + alpha * (y - foot_y)])
+        for k, ((x, y), (foot_x, foot_y)) in enumerate(zip(new, feet, strict=True))
+        if inserted[k]
+    ]
+    middle.sort()
     beyond_start = [new[k] for k in range(prepend) if distances[k] > tolerance]
     beyond_end = [new[k] for k in range(count - append, count) if distances[k] > tolerance]
-    candidates = [*beyond_start, *(item[3] for item in middle), *beyond_end]
-    return [
-        point
-        for k, point in enumerate(candidates)
-        if k == 0 or math.dist(point, candidates[k - 1]) > DUPLICATE_DISTANCE
-    ]
+    candidates = [*beyond_start, *(vertex for _, vertex in middle), *beyond_end]
+    kept = [candidates[0]]
+    for previous, point in itertools.pairwise(candidates):
+        if math.dist(point, previous) > DUPLICATE_DISTANCE:
+            kept.append(point)
+    return kept
 
 
 def _edge_lengths(points: np.ndarray) -> np.ndarray:
@@ -450,7 +503,12 @@ def overlaps(
         span01, _ = _projection_span(points1, points0)
         span10, _ = _projection_span(points0, points1)
         extents = max(span01, span10) > MIN_OVERLAP
-    return extents and restricted_hausdorff(points0, points1, mode=mode) <= gate
+    if not extents:
+        return False
+    # Stops early above the gate: the value is then a lower bound, failing it just the same.
+    line0 = Polyline._trusted(points0, np.arange(points0.shape[0], dtype=np.int64))
+    line1 = Polyline._trusted(points1, np.arange(points1.shape[0], dtype=np.int64))
+    return _restricted_distance(line0, line1, mode, limit=gate) <= gate
 
 
 def join(
@@ -521,7 +579,8 @@ def join(
         return k
 
     if count > 1:
-        near = box_gaps(bounding_boxes(lines), bounding_boxes(lines)) <= gate
+        boxes = bounding_boxes(lines)
+        near = box_gaps(boxes, boxes) <= gate
         near &= changed[:, None] | changed[None, :]
         for a, b in zip(*np.nonzero(np.triu(near, k=1)), strict=True):
             if root(a) != root(b) and overlaps(lines[a], lines[b], gate, mode):

@@ -16,6 +16,7 @@ True
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -106,6 +107,24 @@ class Polyline:
         object.__setattr__(line, "points", points)
         object.__setattr__(line, "scan_indices", scan_indices)
         return line
+
+    @classmethod
+    def _split(
+        cls, points: np.ndarray, scan_indices: np.ndarray, bounds: list[int]
+    ) -> list[Polyline]:
+        """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid arrays.
+
+        The arrays are frozen once and each polyline holds views of them (hot paths only,
+        as :meth:`_trusted`: a whole scan's polylines come out of one array).
+        """
+        points.flags.writeable = False
+        scan_indices.flags.writeable = False
+        lines = []
+        for start, stop in itertools.pairwise(bounds):
+            line = object.__new__(cls)
+            line.__dict__.update(points=points[start:stop], scan_indices=scan_indices[start:stop])
+            lines.append(line)
+        return lines
 
     def __len__(self) -> int:
         return int(self.points.shape[0])

@@ -1,0 +1,426 @@
+"""The Python-float fast paths give what the vectorised paths give.
+
+Small polylines (a handful of vertices, the common case in a mapper update) go through
+plain-Python twins of the numpy code in ``hausdorff``, ``similarity``, ``extraction``
+(Douglas-Peucker) and ``merge``. Each twin is checked here against its vectorised or GEOS
+counterpart on seeded random inputs, and the whole mapper against itself with every fast
+path switched off. So is the association's shortcut past the similarities when the gate
+alone fixes the optimal path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from semistatic.association import FAR_COST, _optimal_path
+from semistatic.extraction import _douglas_peucker_rows
+from semistatic.mapper import MapPolyline, PolylineMap, _replaced, extend_ends
+from semistatic.polyline import Polyline
+from tests.semistatic.conftest import NASTY_POLYLINES
+from tests.semistatic.synthetic import box, cast_scan, scene, wall
+
+# The package re-exports functions named like these modules: import the modules by name.
+hausdorff_module = importlib.import_module("semistatic.hausdorff")
+similarity_module = importlib.import_module("semistatic.similarity")
+merge_module = importlib.import_module("semistatic.merge")
+extraction_module = importlib.import_module("semistatic.extraction")
+association_module = importlib.import_module("semistatic.association")
+
+# Both paths run the same arithmetic in a different order (numpy's complex abs, its dot
+# product's summation): results agree to rounding.
+ROUNDING = 1e-12
+
+
+def _random_polyline(rng, count, spread=1.0):
+    """A random walk of ``count`` vertices; every fourth one on a 0.1 grid (exact ties)."""
+    points = np.cumsum(rng.normal(0.0, spread, (count, 2)), axis=0)
+    return points.round(1) if rng.integers(4) == 0 else points
+
+
+def _pairs(seed):
+    """Random polyline pairs: unrelated, a noisy copy, a partial noisy copy, a point."""
+    rng = np.random.default_rng(seed)
+    first = _random_polyline(rng, int(rng.integers(1, 9)))
+    kind = seed % 4
+    if kind == 0:
+        second = _random_polyline(rng, int(rng.integers(1, 9)))
+    elif kind == 1:
+        second = first + rng.normal(0.0, 0.03, first.shape)
+    elif kind == 2:
+        second = first[: max(1, first.shape[0] // 2)] + rng.normal(0.0, 0.03, (1, 2))
+    else:
+        second = rng.normal(0.0, 1.0, (1, 2))
+    return first, second
+
+
+@pytest.mark.parametrize("seed", range(120))
+def test_hausdorff_python_twin_equals_the_vectorised_branch_and_bound(seed):
+    first, second = _pairs(seed)
+    for points0, points1 in ((first, second), (second, first)):
+        for restricted in (False, True):
+            fast = hausdorff_module._hausdorff_python(
+                points0.tolist(), points1.tolist(), restricted, math.inf
+            )
+            slow = hausdorff_module._hausdorff_core(points0, points1, restricted)
+            assert fast == pytest.approx(slow, abs=ROUNDING)
+
+
+@pytest.mark.parametrize("seed", range(120))
+def test_projection_restriction_twin_equals_the_vectorised_one(seed):
+    first, second = _pairs(seed)
+    for points0, points1 in ((first, second), (second, first)):
+        fast = hausdorff_module._projection_rows(points0.tolist(), points1.tolist())
+        slow, _ = hausdorff_module._restricted(Polyline(points0), Polyline(points1), "projection")
+        np.testing.assert_allclose(np.array(fast).reshape(-1, 2), slow, rtol=0.0, atol=ROUNDING)
+    fast = hausdorff_module._restricted_distance(Polyline(first), Polyline(second), "projection")
+    cut0, _ = hausdorff_module._restricted(Polyline(first), Polyline(second), "projection")
+    cut1, _ = hausdorff_module._restricted(Polyline(second), Polyline(first), "projection")
+    assert fast == pytest.approx(hausdorff_module._hausdorff_core(cut0, cut1, False), abs=ROUNDING)
+
+
+@pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
+def test_hausdorff_python_twin_survives_nasty_polylines(name):
+    nasty = NASTY_POLYLINES[name]
+    other = np.array([[0.0, 1.0], [1.0, 1.5], [2.0, 1.0]])
+    for restricted in (False, True):
+        fast = hausdorff_module._hausdorff_python(
+            nasty.tolist(), other.tolist(), restricted, math.inf
+        )
+        slow = hausdorff_module._hausdorff_core(nasty, other, restricted)
+        assert fast == pytest.approx(slow, abs=ROUNDING) or fast == slow == math.inf
+    for points0, points1 in ((nasty, other), (other, nasty)):
+        fast = hausdorff_module._projection_rows(points0.tolist(), points1.tolist())
+        slow, _ = hausdorff_module._restricted(Polyline(points0), Polyline(points1), "projection")
+        np.testing.assert_allclose(np.array(fast).reshape(-1, 2), slow, rtol=0.0, atol=ROUNDING)
+
+
+def test_large_polylines_take_the_vectorised_path_and_agree():
+    rng = np.random.default_rng(3)
+    line = _random_polyline(rng, 40, spread=0.3)
+    noisy = line + rng.normal(0.0, 0.02, line.shape)
+    assert line.shape[0] * noisy.shape[0] > hausdorff_module.PYTHON_PAIRS
+    fast = hausdorff_module._hausdorff_python(line.tolist(), noisy.tolist(), True, math.inf)
+    assert hausdorff_module.restricted_hausdorff(line, noisy) == pytest.approx(fast, abs=ROUNDING)
+
+
+@pytest.mark.parametrize("seed", range(60))
+@pytest.mark.parametrize("mode", ["vertex", "projection"])
+def test_gate_limit_stops_early_with_the_same_decision(seed, mode):
+    first, second = _pairs(seed)
+    p0, p1 = Polyline(first), Polyline(second)
+    exact = hausdorff_module.restricted_hausdorff(p0, p1, mode=mode)
+    for gate in (0.01, 0.05, 0.12, 0.5, 2.0):
+        limited = hausdorff_module._restricted_distance(p0, p1, mode, limit=gate)
+        assert (limited <= gate) == (exact <= gate)
+        if exact <= gate:
+            assert limited == exact
+        else:
+            assert limited <= exact + hausdorff_module.HAUSDORFF_TOLERANCE
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_tangent_lists_equal_tangent_arrays(seed):
+    rng = np.random.default_rng(seed)
+    points = _random_polyline(rng, int(rng.integers(1, 12)))
+    if seed % 5 == 0:
+        points = np.repeat(points, 2, axis=0)  # zero-length edges
+    breaks, angles, total = similarity_module._tangent_lists(points.tolist())
+    array_breaks, array_angles, array_total = similarity_module._tangent_arrays(points)
+    np.testing.assert_allclose(breaks, array_breaks, rtol=0.0, atol=ROUNDING)
+    np.testing.assert_allclose(angles, array_angles, rtol=0.0, atol=ROUNDING)
+    assert total == pytest.approx(array_total, rel=ROUNDING)
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_similarity_integral_lists_equal_arrays(seed):
+    rng = np.random.default_rng(seed)
+    tangents = [
+        similarity_module._tangent_lists(_random_polyline(rng, int(rng.integers(2, 12))).tolist())
+        for _ in range(2)
+    ]
+    (breaks0, angles0, _), (breaks1, angles1, _) = tangents
+    if not (angles0 and angles1):
+        pytest.skip("a zero-length polyline has no tangent function")
+    fast = similarity_module._integral_lists(breaks0, angles0, breaks1, angles1)
+    slow = similarity_module._integral_arrays(
+        np.array(breaks0), np.array(angles0), np.array(breaks1), np.array(angles1)
+    )
+    assert fast == pytest.approx(slow, rel=1e-9, abs=ROUNDING)
+
+
+def test_long_polylines_take_the_array_path_and_agree():
+    rng = np.random.default_rng(8)
+    long_line = _random_polyline(rng, similarity_module.PYTHON_VERTICES + 10)
+    short_line = _random_polyline(rng, 5)
+    breaks, angles, _ = similarity_module._tangent(Polyline(long_line))
+    list_breaks, list_angles, _ = similarity_module._tangent_lists(long_line.tolist())
+    np.testing.assert_allclose(breaks, list_breaks, atol=ROUNDING)
+    np.testing.assert_allclose(angles, list_angles, atol=ROUNDING)
+    slow = similarity_module.similarity(long_line, short_line)
+    tangent0 = similarity_module._tangent_lists(long_line.tolist())
+    tangent1 = similarity_module._tangent_lists(short_line.tolist())
+    fast = similarity_module._integral_lists(tangent0[0], tangent0[1], tangent1[0], tangent1[1])
+    assert slow == pytest.approx(fast * max(tangent0[2] / tangent1[2], tangent1[2] / tangent0[2]))
+
+
+def test_tangent_function_is_cached_on_the_polyline():
+    line = Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    first = similarity_module._tangent(line)
+    assert similarity_module._tangent(line) is first
+    assert similarity_module._tangent(line.points) is not first  # arrays are not cached
+
+
+@pytest.mark.parametrize("seed", range(150))
+def test_douglas_peucker_python_twin_keeps_what_geos_keeps(seed):
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(1, extraction_module.PYTHON_DOUGLAS_PEUCKER + 1))
+    points = np.cumsum(rng.normal(0.0, rng.uniform(0.005, 0.5), (count, 2)), axis=0)
+    if seed % 3 == 0:
+        points = points.round(1)  # exact ties, repeated and collinear points
+    epsilon = float(rng.choice([0.0, 0.03, 0.1, 0.3]))
+    kept = _douglas_peucker_rows(points.tolist(), epsilon)
+    geometry = shapely.Point(points[0]) if count == 1 else shapely.LineString(points)
+    expected = shapely.get_coordinates(shapely.simplify(geometry, epsilon, preserve_topology=False))
+    np.testing.assert_array_equal(points[kept], expected)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_merge_with_python_simplification_equals_merge_with_geos(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    old = _random_polyline(rng, int(rng.integers(1, 7)), spread=0.5)
+    new = old[int(rng.integers(0, 2)) :] + rng.normal(0.0, 0.02, (1, 2))
+    new = new + rng.normal(0.0, 0.01, new.shape)
+    weight = float(rng.integers(0, 5))
+    fast = merge_module.merge(old, new, 0.03, map_weight=weight)
+    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
+    slow = merge_module.merge(old, new, 0.03, map_weight=weight)
+    np.testing.assert_array_equal(fast.points, slow.points)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_merge_simplification_paths_keep_the_same_vertices(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    rows = np.cumsum(rng.normal(0.0, 0.05, (int(rng.integers(3, 16)), 2)), axis=0).tolist()
+    fast = merge_module._simplified(rows, 0.03)
+    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
+    slow = merge_module._simplified(rows, 0.03)
+    np.testing.assert_array_equal(fast.points, slow.points)
+    np.testing.assert_array_equal(fast.scan_indices, np.arange(len(fast)))
+
+
+@pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
+def test_distinct_rows_equals_distinct(name):
+    points = NASTY_POLYLINES[name]
+    np.testing.assert_array_equal(
+        np.array(merge_module._distinct_rows(points.tolist())).reshape(-1, 2),
+        merge_module._distinct(points),
+    )
+
+
+def _reference_optimal_path(costs):
+    """The DTW recursion of eq. (5) written out cell by cell (the original loop)."""
+    n, m = costs.shape
+    total = np.zeros((n, m))
+    step = np.zeros((n, m), dtype=int)
+    for i in range(n):
+        for j in range(m):
+            if i == 0 and j == 0:
+                best, move = 0.0, 0
+            elif i == 0:
+                best, move = total[i, j - 1], 2
+            elif j == 0:
+                best, move = total[i - 1, j], 1
+            else:
+                best, move = total[i - 1, j - 1], 0
+                if total[i - 1, j] < best:
+                    best, move = total[i - 1, j], 1
+                if total[i, j - 1] < best:
+                    best, move = total[i, j - 1], 2
+            total[i, j] = best + costs[i, j]
+            step[i, j] = move
+    path, i, j = [], n - 1, m - 1
+    while True:
+        path.append((i, j))
+        if i == 0 and j == 0:
+            return path[::-1]
+        i, j = {0: (i - 1, j - 1), 1: (i - 1, j), 2: (i, j - 1)}[int(step[i, j])]
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_optimal_path_equals_the_cell_by_cell_recursion(seed):
+    rng = np.random.default_rng(seed)
+    shape = tuple(int(k) for k in rng.integers(1, 9, 2))
+    costs = rng.integers(0, 3, shape).astype(float)  # many exact ties
+    costs[rng.uniform(size=shape) < 0.4] = FAR_COST
+    assert _optimal_path(costs) == _reference_optimal_path(costs)
+
+
+def test_replaced_entry_equals_dataclasses_replace():
+    entry = MapPolyline(4, Polyline([[0.0, 0.0], [1.0, 0.0]]), "new", 2, 1, 0.5, 0.7)
+    changes = {"status": "confirmed", "hits": 3, "misses": 0, "last_seen": 1.5}
+    assert _replaced(entry, **changes) == dataclasses.replace(entry, **changes)
+    assert entry.status == "new"  # the original is untouched
+
+
+def _hall():
+    """A few boxes and walls around the origin."""
+    parts = [wall((3.0, -1.0), (3.0, 1.0)), wall((-1.0, 2.5), (1.5, 2.5))]
+    parts += [box((1.5, -2.0), 0.5, 0.3, yaw=0.3), box((-2.0, -1.0), 0.4, 0.4, yaw=1.0)]
+    return scene(*parts)
+
+
+def _run(scans, poses):
+    mapper = PolylineMap()
+    reports = [mapper.update(scan, pose) for scan, pose in zip(scans, poses, strict=True)]
+    return mapper, reports
+
+
+def test_mapper_with_all_fast_paths_off_gives_the_same_map(monkeypatch):
+    rng = np.random.default_rng(11)
+    poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(12)]
+    world = _hall()
+    scans = [
+        cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k) for k, pose in enumerate(poses)
+    ]
+    fast_map, fast_reports = _run(scans, poses)
+    assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
+    monkeypatch.setattr(hausdorff_module, "PYTHON_PAIRS", 0)
+    monkeypatch.setattr(similarity_module, "PYTHON_VERTICES", 0)
+    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
+    monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+    slow_map, slow_reports = _run(scans, poses)
+    for fast, slow in zip(fast_reports, slow_reports, strict=True):
+        assert [(a.scan_index, a.map_id) for a in fast.associated] == [
+            (a.scan_index, a.map_id) for a in slow.associated
+        ]
+        np.testing.assert_allclose(
+            [a.distance for a in fast.associated], [a.distance for a in slow.associated], atol=1e-9
+        )
+        assert (fast.new_ids, fast.joined, fast.missed_ids) == (
+            slow.new_ids,
+            slow.joined,
+            slow.missed_ids,
+        )
+    assert list(fast_map.entries) == list(slow_map.entries)
+    for map_id, entry in fast_map.entries.items():
+        other = slow_map[map_id]
+        assert (entry.status, entry.hits, entry.misses) == (other.status, other.hits, other.misses)
+        np.testing.assert_allclose(entry.polyline.points, other.polyline.points, atol=1e-9)
+
+
+def _reference_extend_ends(points, angle_increment, viewpoint, limit=0.10):
+    """extend_ends as first written: list geometry, one end at a time."""
+    relative = [[x - viewpoint[0], y - viewpoint[1]] for x, y in points]
+    extended = [list(point) for point in points]
+    for end, inner, beam_step in ((0, 1, -angle_increment), (-1, -2, angle_increment)):
+        outward = [relative[end][0] - relative[inner][0], relative[end][1] - relative[inner][1]]
+        norm = math.hypot(*outward)
+        if norm == 0.0:
+            continue
+        outward = [outward[0] / norm, outward[1] / norm]
+        beam = math.atan2(relative[end][1], relative[end][0]) + beam_step
+        direction = (math.cos(beam), math.sin(beam))
+        across = direction[0] * outward[1] - direction[1] * outward[0]
+        if abs(across) <= 1e-12:
+            continue
+        along_edge = (relative[end][0] * direction[1] - relative[end][1] * direction[0]) / across
+        along_beam = (relative[end][0] * outward[1] - relative[end][1] * outward[0]) / across
+        if along_edge <= 0.0 or along_beam <= 0.0:
+            continue
+        shift = min(0.5 * along_edge, limit)
+        if shift > 0.0:
+            x, y = points[end]
+            extended[end] = [x + shift * outward[0], y + shift * outward[1]]
+    return np.array(extended)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_extend_ends_equals_the_list_reference(seed):
+    rng = np.random.default_rng(seed)
+    viewpoint = rng.normal(0.0, 1.0, 2)
+    points = viewpoint + np.cumsum(rng.normal(0.0, 1.0, (int(rng.integers(2, 6)), 2)), axis=0)
+    if seed % 7 == 0:
+        points[1] = points[0]  # a zero-length end edge is left alone
+    increment = math.radians(float(rng.choice([0.25, 0.5, 1.0])))
+    moved = extend_ends(points, increment, viewpoint=viewpoint)
+    np.testing.assert_array_equal(
+        moved.points, _reference_extend_ends(points.tolist(), increment, viewpoint)
+    )
+
+
+def _scene_polylines(rng, count):
+    """Short random polylines (1-5 vertices, some of zero length) in a 4 m square."""
+    lines = []
+    for _ in range(count):
+        start = rng.uniform(-2.0, 2.0, 2)
+        points = start + np.cumsum(rng.normal(0.0, 0.4, (int(rng.integers(1, 6)), 2)), axis=0)
+        if rng.integers(10) == 0:
+            points[:] = points[0]  # no shape: similarity inf
+        lines.append(points)
+    return lines
+
+
+def test_forced_association_path_equals_the_full_recursion(monkeypatch):
+    original = association_module._forced_path
+    forced = []
+
+    def recording(*args):
+        path = original(*args)
+        forced.append(path is not None)
+        return path
+
+    for seed in range(80):
+        rng = np.random.default_rng(seed)
+        maps = _scene_polylines(rng, int(rng.integers(1, 8)))
+        scans = [line + rng.normal(0.0, 0.05, (1, 2)) for line in maps]
+        keep = int(rng.integers(1, len(scans) + 1))
+        scans = [scans[k] for k in rng.permutation(len(scans))[:keep]]
+        scans += _scene_polylines(rng, int(rng.integers(0, 3)))
+        gate = float(rng.choice([0.12, 0.5, 1.5]))
+        viewpoint = (0.0, 0.0, float(rng.uniform(-math.pi, math.pi)))
+        monkeypatch.setattr(association_module, "_forced_path", recording)
+        fast = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
+        monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+        slow = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
+        assert fast == slow, seed
+    # Both branches were exercised: paths fixed by the gate alone, and paths that needed
+    # the similarities.
+    assert 10 <= sum(forced) <= len(forced) - 10
+
+
+def test_forced_path_needs_one_best_path():
+    two_ways = np.ones((2, 2), dtype=bool)
+    line = Polyline([[0.0, 0.0], [1.0, 0.0]])
+    # All four pairs can pass: the diagonal and the two L-shaped paths differ only by the
+    # similarities, so they must be computed.
+    assert association_module._forced_path(two_ways, [line, line], [line, line]) is None
+    diagonal = np.eye(2, dtype=bool)
+    assert association_module._forced_path(diagonal, [line, line], [line, line]) == [
+        (0, 0),
+        (1, 1),
+    ]
+
+
+def test_a_typical_update_computes_no_similarity(monkeypatch):
+    calls = []
+    monkeypatch.setattr(association_module, "similarity", lambda *args: calls.append(args) or 0.0)
+    rng = np.random.default_rng(4)
+    world = _hall()
+    mapper = PolylineMap()
+    for k in range(4):
+        pose = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02])
+        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    assert len(mapper) >= 3
+    assert calls == []
+
+
+def test_update_rejects_a_non_finite_pose():
+    scan = cast_scan(_hall(), np.zeros(3))
+    with pytest.raises(ValueError, match="pose must be a finite"):
+        PolylineMap().update(scan, (0.0, math.nan, 0.0))
