@@ -34,25 +34,29 @@ _LIBC = ctypes.CDLL(None)
 
 @contextmanager
 def quiet_stdout() -> Iterator[None]:
-    """Silence what PyBullet's C library prints straight to file descriptor 1.
+    """Silence what PyBullet's C library prints straight to file descriptors 1 and 2.
 
     It writes its build time on import and ``argv[0]=`` on every connection, which would
-    clutter the command line's output and any stdout a caller parses.
+    clutter the command line's output and any stdout a caller parses. Python exceptions
+    are unaffected: they are raised, not printed, inside this block.
     """
     sys.stdout.flush()
+    sys.stderr.flush()
     try:
-        saved = os.dup(1)
-    except OSError:  # no real stdout (e.g. a closed descriptor): nothing to protect
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no real descriptors (e.g. closed): nothing to protect
         yield
         return
     try:
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 1)
+            os.dup2(devnull.fileno(), 2)
             yield
     finally:
         _LIBC.fflush(None)  # C stdio buffers what it printed: flush it into /dev/null
-        os.dup2(saved, 1)
-        os.close(saved)
+        for descriptor, copy in zip((1, 2), saved, strict=True):
+            os.dup2(copy, descriptor)
+            os.close(copy)
 
 
 with quiet_stdout():
