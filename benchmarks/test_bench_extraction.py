@@ -10,12 +10,11 @@ in two scans. Run with
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import shapely
 
+from benchmarks.timing import median_us as timed_median_us
 from semistatic.extraction import (
     _douglas_peucker_lines,
     douglas_peucker,
@@ -36,14 +35,8 @@ REPEATS = 400
 
 
 def median_us(run, repeats=REPEATS):
-    """Return the median wall time of ``run()`` in microseconds."""
-    run()  # warm up caches and lazy imports
-    times = np.empty(repeats)
-    for k in range(repeats):
-        start = time.perf_counter()
-        run()
-        times[k] = time.perf_counter() - start
-    return float(np.median(times) * 1e6)
+    """Return the median time of ``run()`` in microseconds (see ``benchmarks.timing``)."""
+    return timed_median_us(run, repeats)
 
 
 def test_extraction_stages():

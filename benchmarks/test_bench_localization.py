@@ -9,11 +9,10 @@ Run with ``.venv/bin/python -m pytest -m bench -s benchmarks/test_bench_localiza
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
+from benchmarks.timing import median_us as timed_median_us
 from robots.ekf import EKFLocalizer, EKFParams, _residual
 from robots.landmarks import (
     LandmarkObservation,
@@ -38,14 +37,8 @@ HALL = [
 
 
 def median_us(run, repeats=REPEATS):
-    """Return the median wall time of ``run()`` in microseconds."""
-    run()  # warm up caches and lazy imports
-    times = np.empty(repeats)
-    for k in range(repeats):
-        start = time.perf_counter()
-        run()
-        times[k] = time.perf_counter() - start
-    return float(np.median(times) * 1e6)
+    """Return the median time of ``run()`` in microseconds (see ``benchmarks.timing``)."""
+    return timed_median_us(run, repeats)
 
 
 def four_observations(pose):

@@ -20,6 +20,7 @@ from operator import itemgetter
 import numpy as np
 import pytest
 
+from benchmarks.timing import median_us as timed_median_us
 from robots.follower import ChainedFormFollower
 from robots.landmarks import detect_landmarks
 from robots.lasers import LMS100
@@ -44,14 +45,8 @@ REPEATS = 2000
 
 
 def median_us(run, repeats=REPEATS, clock=time.thread_time):
-    """Return the median time of ``run()`` on ``clock`` in microseconds."""
-    run()  # warm up caches and lazy imports
-    times = np.empty(repeats)
-    for k in range(repeats):
-        start = clock()
-        run()
-        times[k] = clock() - start
-    return float(np.median(times) * 1e6)
+    """Return the median time of ``run()`` in microseconds (see ``benchmarks.timing``)."""
+    return timed_median_us(run, repeats, clock)
 
 
 def report(name, fast_us, reference_us):

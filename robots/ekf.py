@@ -66,6 +66,7 @@ from robots.landmarks import (
     range_bearing_model,
 )
 from robots.triangulation import DEFAULT_MIN_RELIABILITY, TriangulationError, triangulate
+from semistatic.frames import wrap_angle
 
 __all__ = ["EKFLocalizer", "EKFParams", "EKFRecord"]
 
@@ -84,12 +85,6 @@ _MIN_TRIANGULATION_POSTS = 3
 
 # Jacobian of one (range, bearing) observation with respect to the range bias.
 _BIAS_JACOBIAN = np.array([1.0, 0.0])
-
-
-def _wrap(angle: float) -> float:
-    """Wrap a scalar angle to ``(-pi, pi]`` (scalar fast path of ``frames.wrap_angle``)."""
-    wrapped = math.remainder(angle, _TWO_PI)
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 def _residual(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
@@ -272,7 +267,7 @@ class _CompoundingEKF(ExtendedKalmanFilter):
         state = self.x.copy()  # a range-bias row, if any, is constant during prediction
         state[0, 0] = x + c * u[0] - s * u[1]
         state[1, 0] = y + s * u[0] + c * u[1]
-        state[2, 0] = _wrap(theta + u[2])
+        state[2, 0] = wrap_angle(theta + u[2])
         self.x = state
 
 
@@ -409,7 +404,7 @@ class EKFLocalizer:
         cov = np.asarray(cov, dtype=float).reshape(3, 3)
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(cov))):
             raise ValueError("EKFLocalizer.initialize: pose and cov must be finite")
-        heading = _wrap(float(pose[2]))
+        heading = wrap_angle(float(pose[2]))
         if self._has_bias:
             if stamp is not None:
                 self._propagate_bias(float(stamp))
@@ -518,7 +513,7 @@ class EKFLocalizer:
             R=noise,
             residual=_residual,
         )
-        self._filter.x[2, 0] = _wrap(self._filter.x[2, 0])
+        self._filter.x[2, 0] = wrap_angle(self._filter.x[2, 0])
         self._filter.P = self._repair_covariance(self._filter.P)
         self.last_update_stamp = stamp
         if self.params.record_history:
@@ -604,7 +599,7 @@ class EKFLocalizer:
             [
                 sensor_pose[0] + c * bx - s * by,
                 sensor_pose[1] + s * bx + c * by,
-                _wrap(theta - mount_yaw),
+                wrap_angle(theta - mount_yaw),
             ]
         )
         jacobian = np.array(
@@ -703,7 +698,7 @@ class EKFLocalizer:
         """Append the correction just applied to ``history``."""
         posterior = self._filter.x[:3, 0].copy()
         correction = posterior - prior
-        correction[2] = _wrap(correction[2])
+        correction[2] = wrap_angle(correction[2])
         self.history.append(
             EKFRecord(
                 stamp=stamp,

@@ -67,6 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from robots.path import SplinePath
+from semistatic.frames import wrap_angle
 
 __all__ = ["ChainedFormFollower", "FollowerParams"]
 
@@ -149,20 +150,6 @@ class FollowerParams:
                 raise ValueError(f"FollowerParams: {name} must be finite, got inf")
 
 
-def _wrap(angle: float) -> float:
-    """Wrap one float angle to ``(-pi, pi]``: ``semistatic.frames.wrap_angle``'s formula.
-
-    The same float operations (Python's ``%`` and ``numpy.mod`` round alike) without the
-    array round trip, which costs more than the control law itself at 50 Hz.
-
-    Examples
-    --------
-    >>> _wrap(-math.pi), round(_wrap(3.0 * math.pi / 2.0), 6)
-    (3.141592653589793, -1.570796)
-    """
-    return math.pi - (math.pi - angle) % (2.0 * math.pi)
-
-
 class ChainedFormFollower:
     """Follow a ``SplinePath`` with eq. (6), tracking the progress by projection.
 
@@ -240,7 +227,7 @@ class ChainedFormFollower:
         c, s_theta = math.cos(theta), math.sin(theta)
         xe = c * dx + s_theta * dy
         ye = -s_theta * dx + c * dy
-        return xe, ye, _wrap(theta - theta_ref)
+        return xe, ye, wrap_angle(theta - theta_ref)
 
     def command(self, pose: ArrayLike, dt: float, speed_scale: float = 1.0) -> tuple[float, float]:
         """Advance the progress to ``pose`` and return the wheel-base command ``(v, omega)``.

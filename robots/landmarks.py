@@ -119,12 +119,7 @@ class LandmarkObservation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "range", float(self.range))
-        bearing = float(self.bearing)
-        if math.isfinite(bearing):
-            # wrap_angle's formula on a float: the same rounding without an array round trip.
-            bearing = math.pi - (math.pi - bearing) % (2.0 * math.pi)
-        else:
-            bearing = float(wrap_angle(bearing))
+        bearing = wrap_angle(float(self.bearing))
         object.__setattr__(self, "bearing", bearing)
         covariance = np.array(self.covariance, dtype=np.float64)
         if covariance.shape != (2, 2):

@@ -16,6 +16,8 @@ array([0., 0., 0.])
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -29,6 +31,9 @@ __all__ = [
 ]
 
 
+_TWO_PI = 2.0 * math.pi
+
+
 def wrap_angle(angle: ArrayLike) -> np.ndarray | float:
     """Wrap angles to ``(-pi, pi]``.
 
@@ -38,8 +43,17 @@ def wrap_angle(angle: ArrayLike) -> np.ndarray | float:
     -1.5707963267948966
     >>> float(wrap_angle(-np.pi))
     3.141592653589793
+    >>> wrap_angle(math.nextafter(math.pi, 4.0))  # rounds onto -pi; the interval is (-pi, pi]
+    3.141592653589793
     """
+    if type(angle) is float:
+        # Hot loops call this on plain floats; Python's % rounds exactly like np.mod,
+        # without the array round trip (a tested equivalence).
+        wrapped = math.pi - (math.pi - angle) % _TWO_PI
+        return math.pi if wrapped == -math.pi else wrapped
     wrapped = np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), 2.0 * np.pi)
+    # Rounding can land exactly on -pi (just above pi, say): the interval is (-pi, pi].
+    wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
     return float(wrapped) if wrapped.ndim == 0 else wrapped
 
 

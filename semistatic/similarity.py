@@ -36,6 +36,7 @@ from bisect import bisect_right
 import numpy as np
 from numpy.typing import ArrayLike
 
+from semistatic.frames import wrap_angle
 from semistatic.polyline import Polyline, as_polyline
 
 __all__ = ["similarity", "tangent_function"]
@@ -89,7 +90,7 @@ def _tangent_lists(rows: list[list[float]]) -> _Tangent:
     first = directions[0]
     angles, swept = [first], 0.0
     for previous, direction in itertools.pairwise(directions):
-        swept += math.pi - (math.pi - (direction - previous)) % (2.0 * math.pi)
+        swept += wrap_angle(direction - previous)
         angles.append(first + swept)
     arcs, total = [0.0], 0.0
     for length in lengths:

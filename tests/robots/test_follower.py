@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from robots.follower import ChainedFormFollower, FollowerParams, _wrap
+from robots.follower import ChainedFormFollower, FollowerParams
 from robots.path import SplinePath
-from semistatic.frames import wrap_angle
 from tests.robots.follower_reference import ArrayPathFollower
 
 DT = 0.02
@@ -281,13 +280,6 @@ def test_bad_command_arguments_are_rejected():
         follower.command([0.0, 0.0, 0.0], 0.0)
     with pytest.raises(ValueError, match=r"speed_scale must be in \[0, 1\]"):
         follower.command([0.0, 0.0, 0.0], DT, speed_scale=1.5)
-
-
-def test_float_wrap_is_wrap_angle_to_the_last_bit():
-    angles = np.random.default_rng(0).normal(0.0, 10.0, 2000)
-    specials = [0.0, -0.0, math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 3 * math.pi, 1e-300]
-    for angle in [*angles.tolist(), *specials, math.nextafter(math.pi, 4.0)]:
-        assert _wrap(angle) == wrap_angle(angle)
 
 
 def test_commands_match_a_follower_on_the_array_path_queries():

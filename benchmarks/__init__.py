@@ -1,0 +1,1 @@
+"""Speed measurements (``pytest -m bench benchmarks``): figures are printed, never asserted."""
