@@ -72,6 +72,13 @@ __all__ = [
 # few tens, so any such pair is cheaper than one unvalidatable pair.
 FAR_COST = 1.0e6
 
+# Up to this many vertices in all, the polylines' bearings are summarised with Python floats
+# (a few microseconds) rather than in about twenty numpy calls.
+PYTHON_CCW_VERTICES = 24
+
+# Up to this many scan x map pairs, box gaps are found with Python floats, not numpy.
+PYTHON_BOX_PAIRS = 64
+
 
 def bounding_boxes(polylines: Sequence[Polyline | ArrayLike]) -> np.ndarray:
     """Return the ``(K, 4)`` axis-aligned boxes ``(xmin, ymin, xmax, ymax)`` of polylines.
@@ -85,17 +92,8 @@ def bounding_boxes(polylines: Sequence[Polyline | ArrayLike]) -> np.ndarray:
     array([[ 0., -1.,  2.,  1.],
            [ inf,  inf, -inf, -inf]])
     """
-    lines = [as_polyline(polyline) for polyline in polylines]
-    boxes = np.empty((len(lines), 4))
-    boxes[:] = (math.inf, math.inf, -math.inf, -math.inf)
-    filled = [row for row, line in enumerate(lines) if len(line)]
-    if filled:
-        # One reduceat over all vertices instead of two reductions per polyline.
-        points = np.concatenate([lines[row].points for row in filled])
-        starts = np.cumsum([0] + [len(lines[row]) for row in filled[:-1]])
-        boxes[filled, :2] = np.minimum.reduceat(points, starts, axis=0)
-        boxes[filled, 2:] = np.maximum.reduceat(points, starts, axis=0)
-    return boxes
+    boxes = [as_polyline(polyline).box for polyline in polylines]
+    return np.array(boxes, dtype=np.float64).reshape(len(boxes), 4)
 
 
 def box_gaps(boxes_a: ArrayLike, boxes_b: ArrayLike) -> np.ndarray:
@@ -175,6 +173,11 @@ def _ccw_summary(
     filled = [k for k, size in enumerate(sizes) if size]
     if not filled:
         return keys, clockwise
+    if sum(sizes) <= PYTHON_CCW_VERTICES:
+        x, y, theta = pose.tolist()
+        for k in filled:
+            keys[k], clockwise[k] = _ccw_summary_one(polylines[k].points.tolist(), x, y, theta)
+        return keys, clockwise
     points = np.concatenate([polylines[k].points for k in filled])
     starts = np.cumsum([0] + [sizes[k] for k in filled[:-1]])
     bearings = _bearings(points, pose)
@@ -197,6 +200,22 @@ def _ccw_summary(
         keys[k] = (first[row], last[row], nearest[row])
         clockwise[k] = swept[row] < 0.0
     return keys, clockwise
+
+
+def _ccw_summary_one(
+    rows: list[list[float]], x: float, y: float, theta: float
+) -> tuple[tuple[float, float, float], bool]:
+    """Return :func:`_ccw_summary` of one non-empty polyline with Python floats."""
+    bearings = [wrap_angle(math.atan2(py - y, px - x) - theta) for px, py in rows]
+    nearest = min(math.hypot(px - x, py - y) for px, py in rows)
+    swept, crosses = 0.0, False
+    for before, after in itertools.pairwise(bearings):
+        jump = after - before
+        swept += wrap_angle(jump)
+        crosses = crosses or abs(jump) > math.pi
+    if crosses:
+        return (-math.pi, math.pi, nearest), swept < 0.0
+    return (min(bearings), max(bearings), nearest), swept < 0.0
 
 
 def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) -> np.ndarray:
@@ -334,8 +353,26 @@ def _length(polyline: Polyline) -> float:
     return sum(map(math.dist, rows, rows[1:]))
 
 
+def _near_boxes(
+    boxes_a: list[tuple[float, ...]], boxes_b: list[tuple[float, ...]], gate: float
+) -> list[list[bool]]:
+    """Return :func:`box_gaps` ``<= gate`` as lists (Python floats for a few pairs)."""
+    if len(boxes_a) * len(boxes_b) > PYTHON_BOX_PAIRS:
+        gaps = box_gaps(np.array(boxes_a).reshape(-1, 4), np.array(boxes_b).reshape(-1, 4))
+        return (gaps <= gate).tolist()
+    near = []
+    for xmin, ymin, xmax, ymax in boxes_a:
+        row = []
+        for other_xmin, other_ymin, other_xmax, other_ymax in boxes_b:
+            gap_x = max(xmin - other_xmax, other_xmin - xmax, 0.0)
+            gap_y = max(ymin - other_ymax, other_ymin - ymax, 0.0)
+            row.append(gap_x <= gate and gap_y <= gate and math.hypot(gap_x, gap_y) <= gate)
+        near.append(row)
+    return near
+
+
 def _forced_path(
-    feasible: np.ndarray, scans: list[Polyline], maps: list[Polyline]
+    feasible: list[list[bool]], scans: list[Polyline], maps: list[Polyline]
 ) -> list[tuple[int, int]] | None:
     """Return the association path when the similarities cannot change it, else ``None``.
 
@@ -352,25 +389,29 @@ def _forced_path(
     scan_lengths = [_length(line) for line in scans]
     map_lengths = [_length(line) for line in maps]
     shaped = all(scan_lengths) and all(map_lengths)
+    size = len(feasible)
     if (
         shaped
-        and feasible.shape[0] == feasible.shape[1]
-        and np.array_equal(feasible, np.eye(feasible.shape[0], dtype=bool))
+        and size == len(feasible[0])
+        and all(feasible[a][b] == (a == b) for a in range(size) for b in range(size))
     ):
         # Each polyline near exactly its counterpart in the same order (the usual case): the
         # diagonal is the only path without a FAR_COST pair.
-        path = [(k, k) for k in range(feasible.shape[0])]
+        path = [(k, k) for k in range(size)]
     else:
-        hard = ~feasible
-        if not shaped:
-            hard |= (np.array(scan_lengths) == 0.0)[:, None] | (np.array(map_lengths) == 0.0)
-        path, totals = _dtw(hard.astype(np.float64).tolist())
+        hard = [
+            [
+                0.0 if near and scan_length > 0.0 and map_length > 0.0 else 1.0
+                for near, map_length in zip(row, map_lengths, strict=True)
+            ]
+            for row, scan_length in zip(feasible, scan_lengths, strict=True)
+        ]
+        path, totals = _dtw(hard)
         if not _is_unique(path, totals):
             return None
     bound = 0.0
-    near = feasible.tolist()
     for a, b in path:
-        if near[a][b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
+        if feasible[a][b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
             ratio = max(scan_lengths[a] / map_lengths[b], map_lengths[b] / scan_lengths[a])
             bound += 2.0 * ((len(scans[a]) + len(maps[b])) * math.pi) ** 2 * ratio
     return path if bound < FAR_COST else None
@@ -407,11 +448,11 @@ def associate_with_distances(
         return []
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects.
-    near = box_gaps(bounding_boxes(scans), bounding_boxes(maps)) <= gate
-    rows = np.flatnonzero(near.any(axis=1)).tolist()
-    columns = np.flatnonzero(near.any(axis=0)).tolist()
+    near = _near_boxes([line.box for line in scans], [line.box for line in maps], gate)
+    rows = [i for i, row in enumerate(near) if any(row)]
     if not rows:
         return []
+    columns = [j for j in range(len(maps)) if any(row[j] for row in near)]
     if viewpoint is None:
         order = columns
         ordered = [maps[k] for k in order]
@@ -423,20 +464,19 @@ def associate_with_distances(
         # Similarity compares tangent functions, which needs both polylines traversed the
         # same way round: a map polyline first seen from its other side is reversed.
         ordered = [_reversed(candidates[k]) if clockwise[k] else candidates[k] for k in ranks]
-    feasible = near[np.ix_(rows, order)]
+    feasible = [[near[row][column] for column in order] for row in rows]
     path = _forced_path(feasible, [scans[row] for row in rows], ordered)
     if path is None:
-        costs = np.full(feasible.shape, FAR_COST)
+        costs = np.full((len(rows), len(order)), FAR_COST)
         for a, b in zip(*np.nonzero(feasible), strict=True):
             value = similarity(scans[rows[a]], ordered[b])
             if value < FAR_COST:
                 costs[a, b] = value
         path = _optimal_path(costs)
     pairs = []
-    near_pairs = feasible.tolist()
     for a, b in path:
         scan, candidate = scans[rows[a]], ordered[b]
-        if not near_pairs[a][b] or len(scan) == 0 or len(candidate) == 0:
+        if not feasible[a][b] or len(scan) == 0 or len(candidate) == 0:
             continue
         # Stops early above the gate: the value is then only a lower bound, but one that
         # fails the gate exactly when the full distance does.

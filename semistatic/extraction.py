@@ -23,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -128,31 +129,56 @@ def remove_outliers(ranges: ArrayLike, valid: ArrayLike, k: int, alpha: float) -
         raise ValueError(f"remove_outliers: k must be an integer >= 1, got {k!r}")
     if not alpha > 0:
         raise ValueError(f"remove_outliers: alpha must be > 0, got {alpha!r}")
-    k = int(k)
     index = np.flatnonzero(valid)
-    values = ranges[index]
+    kept = valid.copy()
+    kept[index[_outliers(ranges[index], int(k), alpha)]] = False
+    return kept
+
+
+def _outliers(values: np.ndarray, k: int, alpha: float) -> np.ndarray:
+    """Return which of the consecutive valid ``values`` :func:`remove_outliers` drops."""
     count = values.size
     if count < 2:
-        return valid.copy()
+        return np.zeros(count, dtype=bool)
     # Window sums from cumulative sums: window i spans valid readings [low, high). Ranges
     # are centred first, which keeps the rounding of E[r^2] - E[r]^2 near 1e-10 m^2 even
     # for 80 m ranges: far below any real range noise.
-    centred = values - values.mean()
+    centred = values - np.add.reduce(values) / count  # == values.mean(), without its overhead
     sums = np.zeros(count + 1)
     np.cumsum(centred, out=sums[1:])
     squares = np.zeros(count + 1)
     np.cumsum(centred * centred, out=squares[1:])
-    position = np.arange(count)
-    low = np.maximum(position - k, 0)
-    high = np.minimum(position + k + 1, count)
-    size = high - low
+    low, high, size = _windows(count, k)
     mean = (sums[high] - sums[low]) / size
     variance = (squares[high] - squares[low]) / size - mean * mean
     sigma = np.sqrt(np.maximum(variance, 0.0))
-    outlier = (np.abs(centred - mean) > alpha * sigma) & (sigma > FLAT_WINDOW_SIGMA)
-    kept = valid.copy()
-    kept[index[outlier]] = False
-    return kept
+    return (np.abs(centred - mean) > alpha * sigma) & (sigma > FLAT_WINDOW_SIGMA)
+
+
+@functools.lru_cache(maxsize=64)
+def _windows(count: int, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the ``[low, high)`` bounds and sizes of the ``2k+1`` windows over ``count``."""
+    position = np.arange(count)
+    low = np.maximum(position - k, 0)
+    high = np.minimum(position + k + 1, count)
+    return _frozen(low), _frozen(high), _frozen(high - low)
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    """Return ``array`` made read-only (it is shared through a cache)."""
+    array.flags.writeable = False
+    return array
+
+
+@functools.lru_cache(maxsize=16)
+def _beam_directions(count: int, angle_min: float, angle_increment: float):
+    """Return the cosines and sines of the ``count`` beam angles of a scan geometry.
+
+    Scans of one scanner share them; ``angle_min + angle_increment * i`` is the angle of
+    :meth:`Scan.angles`, so the values are bitwise those of computing them every scan.
+    """
+    angles = angle_min + angle_increment * np.arange(count)
+    return _frozen(np.cos(angles)), _frozen(np.sin(angles))
 
 
 def split_breakpoints(
@@ -224,20 +250,36 @@ def split_breakpoints(
 def _end_points(scan: Scan, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return the sensor-frame x and y of the beams ``index``."""
     ranges = scan.ranges[index]
-    angles = scan.angle_min + scan.angle_increment * index
-    return ranges * np.cos(angles), ranges * np.sin(angles)
+    cos, sin = _beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    return ranges * cos[index], ranges * sin[index]
 
 
 def _joined(
     scan: Scan, index: np.ndarray, x: np.ndarray, y: np.ndarray, lam: float, sigma_r: float
 ) -> np.ndarray:
     """Return, for each pair of consecutive usable beams, whether they stay together."""
-    step = np.diff(index)
-    dphi = step * scan.angle_increment
-    with np.errstate(divide="ignore", invalid="ignore"):
-        threshold = scan.ranges[index[:-1]] * np.sin(dphi) / np.sin(lam - dphi) + 3.0 * sigma_r
-    jump = np.hypot(np.diff(x), np.diff(y))
-    return (step <= MAX_BRIDGED_GAP + 1) & (dphi < lam) & (jump <= threshold)
+    # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a table,
+    # and any longer step reads the table's last row, whose threshold joins nothing.
+    sines, denominators = _breakpoint_sines(scan.angle_increment, lam)
+    step = np.minimum(np.diff(index), MAX_BRIDGED_GAP + 2)
+    threshold = scan.ranges[index[:-1]] * sines[step] / denominators[step] + 3.0 * sigma_r
+    return np.hypot(np.diff(x), np.diff(y)) <= threshold
+
+
+@functools.lru_cache(maxsize=16)
+def _breakpoint_sines(angle_increment: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``sin(dphi)`` and ``sin(lam - dphi)`` per beam step ``0 .. MAX_BRIDGED_GAP + 2``.
+
+    ``dphi = step * angle_increment``, computed as in the adaptive breakpoint formula.
+    A step that can never join (none, too long, or ``dphi >= lam``) gets ``-inf / 1``,
+    a threshold no jump is below.
+    """
+    steps = np.arange(MAX_BRIDGED_GAP + 3)
+    dphi = steps * angle_increment
+    sines, denominators = np.sin(dphi), np.sin(lam - dphi)
+    never = (steps == 0) | (steps > MAX_BRIDGED_GAP + 1) | (dphi >= lam)
+    sines[never], denominators[never] = -np.inf, 1.0
+    return _frozen(sines), _frozen(denominators)
 
 
 def _douglas_peucker_lines(points: np.ndarray, line_ids: np.ndarray, epsilon: float) -> np.ndarray:
@@ -379,10 +421,10 @@ def _extracted_vertices(
     ``bounds[k]:bounds[k + 1]``. Both arrays are fresh, so slices of them can become
     polylines without copies (and the mapper moves all vertices in one transform).
     """
-    valid = remove_invalid(scan, params.max_range)
-    valid = remove_outliers(scan.ranges, valid, params.outlier_k, params.outlier_alpha)
-    # split_breakpoints and douglas_peucker fused: the same steps on flat arrays.
-    index = np.flatnonzero(valid)
+    index = np.flatnonzero(remove_invalid(scan, params.max_range))
+    # remove_outliers, split_breakpoints and douglas_peucker fused: the same steps on flat
+    # arrays, with the checks of the public functions done once (by MapperParams).
+    index = index[~_outliers(scan.ranges[index], params.outlier_k, params.outlier_alpha)]
     nothing = (np.empty((0, 2)), np.empty(0, dtype=np.int64), [0])
     if index.size < params.min_points:
         return nothing

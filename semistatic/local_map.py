@@ -49,7 +49,7 @@ from shapely.geometry import mapping, shape
 from semistatic.frames import between, transform_points, untransform_points
 from semistatic.mapper import STATUSES, MapPolyline, PolylineMap, UpdateReport
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline
+from semistatic.polyline import EMPTY_BOX, Polyline
 from semistatic.types import Scan
 
 __all__ = ["LocalMap"]
@@ -132,7 +132,17 @@ class LocalMap:
         self.origin = origin
         self.segment = segment
         self.safety_area = _area_union(safety_areas)
-        self._map = PolylineMap(params, keep=self._touches_safety_area, join_mode=join_mode)
+        self._area_box = (
+            tuple(shapely.bounds(self.safety_area).tolist())
+            if self.safety_area is not None and not self.safety_area.is_empty
+            else EMPTY_BOX
+        )
+        self._map = PolylineMap(
+            params,
+            keep=self._touches_safety_area,
+            keep_box=None if self.safety_area is None else self._area_box,
+            join_mode=join_mode,
+        )
 
     @property
     def params(self) -> MapperParams:
@@ -196,6 +206,11 @@ class LocalMap:
             return True
         if len(polyline) == 0:
             return False
+        # Most new scan polylines lie well away from the area: their boxes tell at once.
+        xmin, ymin, xmax, ymax = polyline.box
+        area_xmin, area_ymin, area_xmax, area_ymax = self._area_box
+        if xmin > area_xmax or xmax < area_xmin or ymin > area_ymax or ymax < area_ymin:
+            return False
         if len(polyline) == 1:
             geometry = shapely.Point(polyline.points[0])
         else:
@@ -209,13 +224,17 @@ class LocalMap:
         *,
         merge: bool = True,
         timings: dict[str, float] | None = None,
+        scan_polylines: tuple[Polyline, ...] | None = None,
     ) -> UpdateReport:
         """Update the map with one scan taken from sensor ``pose`` (world frame).
 
         See :meth:`semistatic.mapper.PolylineMap.update`; the report's polylines are in
-        the segment frame.
+        the segment frame, and so must ``scan_polylines`` be (e.g. the report of another
+        map of the same segment for the same scan).
         """
-        return self._map.update(scan, self.to_local(pose), merge=merge, timings=timings)
+        return self._map.update(
+            scan, self.to_local(pose), merge=merge, timings=timings, scan_polylines=scan_polylines
+        )
 
     def to_geojson(self) -> dict[str, Any]:
         """Return the map as a GeoJSON FeatureCollection in world coordinates.

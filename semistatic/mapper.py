@@ -41,6 +41,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -52,7 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
-from semistatic.extraction import _extracted_vertices
+from semistatic.extraction import _beam_directions, _extracted_vertices
 from semistatic.frames import transform_points, untransform_points
 from semistatic.merge import END_TOLERANCE_FACTOR, _merge_rows, join
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
@@ -244,9 +245,14 @@ def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
         if abs(math.remainder(angles[beam] - bearing, 2.0 * math.pi)) <= 0.5 * step:
             ranges[beam] = float(np.hypot(points[0, 0], points[0, 1]))
         return ranges
+    return _edge_hits(points, np.cos(angles), np.sin(angles))
+
+
+def _edge_hits(points: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+    """Return :func:`expected_ranges` of ``N >= 2`` vertices for beam directions (cos, sin)."""
     starts = points[:-1]
     edges = np.diff(points, axis=0)
-    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    dx, dy = cos[:, None], sin[:, None]
     denominator = dx * edges[:, 1] - dy * edges[:, 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         along_beam = (starts[:, 0] * edges[:, 1] - starts[:, 1] * edges[:, 0]) / denominator
@@ -258,6 +264,23 @@ def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
         & (along_edge <= 1.0)
     )
     return np.where(hit, along_beam, math.inf).min(axis=1)
+
+
+def _beams_in_sector(points: np.ndarray, scan: Scan) -> tuple[int, int]:
+    """Return the beams ``[first, stop)`` of ``scan`` that can hit polyline ``points``.
+
+    ``points`` are ``N >= 2`` vertices in the sensor frame. A straight edge subtends the
+    bearings between its ends, so no beam outside the vertices' bearing interval hits
+    the polyline; one beam more on each side absorbs rounding. An edge that crosses the
+    cut behind the sensor (bearing jump above pi) gets every beam.
+    """
+    count = scan.ranges.size
+    bearings = np.arctan2(points[:, 1], points[:, 0]).tolist()
+    if any(abs(b - a) > math.pi for a, b in itertools.pairwise(bearings)):
+        return 0, count
+    low = (min(bearings) - scan.angle_min) / scan.angle_increment
+    high = (max(bearings) - scan.angle_min) / scan.angle_increment
+    return max(0, math.floor(low) - 1), min(count, math.ceil(high) + 2)
 
 
 def extend_ends(
@@ -406,12 +429,19 @@ def visible_beams(
     (4, 3, 2)
     """
     points = untransform_points(pose, as_polyline(polyline).points)
-    expected = expected_ranges(points, scan.angles())
+    if points.shape[0] < 2:
+        expected, ranges = expected_ranges(points, scan.angles()), scan.ranges
+    else:
+        # Only the beams of the polyline's sector can hit it: the others expect inf.
+        first, stop = _beams_in_sector(points, scan)
+        cos, sin = _beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+        expected = _edge_hits(points, cos[first:stop], sin[first:stop])
+        ranges = scan.ranges[first:stop]
     limit = min(scan.range_max, max_range)
     in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= limit)
     with np.errstate(invalid="ignore"):
-        unoccluded = in_view & (scan.ranges >= expected - margin)
-        seen_through = unoccluded & (scan.ranges > expected + margin)
+        unoccluded = in_view & (ranges >= expected - margin)
+        seen_through = unoccluded & (ranges > expected + margin)
     return BeamCounts(int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum()))
 
 
@@ -480,6 +510,10 @@ class PolylineMap:
         Thresholds; ``MapperParams()`` when omitted.
     keep
         Predicate on a new polyline (map frame): insert it only when true. Default: all.
+    keep_box
+        ``(xmin, ymin, xmax, ymax)`` outside which ``keep`` is known to be false (e.g. the
+        bounds of a safety area): new scan polylines far from it are dropped before any
+        work is spent on them. Default: no such box.
     join_mode
         Restriction of the restricted Hausdorff distance that decides which polylines are
         joined. Default ``"projection"`` whatever ``params.hausdorff_restriction`` says:
@@ -502,6 +536,7 @@ class PolylineMap:
         params: MapperParams | None = None,
         *,
         keep: Callable[[Polyline], bool] | None = None,
+        keep_box: tuple[float, float, float, float] | None = None,
         join_mode: str = "projection",
     ) -> None:
         if join_mode not in HAUSDORFF_RESTRICTIONS:
@@ -511,6 +546,7 @@ class PolylineMap:
         self.params = MapperParams() if params is None else params
         self.join_mode = join_mode
         self._keep = keep
+        self._keep_box = keep_box
         self._entries: dict[int, MapPolyline] = {}
         self._next_id = 0
 
@@ -580,6 +616,7 @@ class PolylineMap:
         *,
         merge: bool = True,
         timings: dict[str, float] | None = None,
+        scan_polylines: tuple[Polyline, ...] | None = None,
     ) -> UpdateReport:
         """Update the map with one scan (extract, associate, merge, insert, join, life cycle).
 
@@ -596,6 +633,10 @@ class PolylineMap:
         timings
             If given, the seconds spent in each stage are added to it under ``"extract"``,
             ``"associate"``, ``"merge"``, ``"join"`` and ``"life_cycle"``.
+        scan_polylines
+            The polylines of this very scan from this pose in this map's frame, when
+            another map in the same frame has extracted them already (its report's
+            ``scan_polylines``): extraction is then skipped.
 
         Returns
         -------
@@ -617,7 +658,10 @@ class PolylineMap:
         if not np.isfinite(pose).all():
             raise ValueError(f"PolylineMap.update: pose must be a finite (x, y, theta), got {pose}")
         stamp = scan.stamp
-        scan_lines = _map_frame_polylines(scan, params, pose)
+        if scan_polylines is None:
+            scan_lines = _map_frame_polylines(scan, params, pose)
+        else:
+            scan_lines = tuple(scan_polylines)
         clock.lap("extract")
 
         ids = list(self._entries)
@@ -646,13 +690,18 @@ class PolylineMap:
 
         # Association compares what the scan saw; the map takes the unbiased ends.
         x, y = pose[:2].tolist()
-        observed = [
-            _extended_rows(line.points.tolist(), scan.angle_increment, x, y, MAX_END_EXTENSION)
-            for line in scan_lines
-        ]
-        changed = self._merge_associated([rows for rows, _ in observed], associated, stamp)
+        observed = {
+            index: _extended_rows(
+                scan_lines[index].points.tolist(), scan.angle_increment, x, y, MAX_END_EXTENSION
+            )
+            for index in [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
+        }
+        changed = self._merge_associated(
+            {index: rows for index, (rows, _) in observed.items()}, associated, stamp
+        )
         new_ids = self._insert_new(
-            {index: _observed(scan_lines[index], *observed[index]) for index in unassociated},
+            [_observed(scan_lines[index], *observed[index]) for index in unassociated
+             if index in observed],
             stamp,
         )
         changed.update(new_ids)
@@ -696,8 +745,29 @@ class PolylineMap:
             joined=tuple(joined),
         )
 
+    def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
+        """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
+        if self._keep_box is None:
+            return list(indices)
+        # Extending an end moves it at most MAX_END_EXTENSION: the box grows by no more.
+        xmin, ymin, xmax, ymax = self._keep_box
+        reach = MAX_END_EXTENSION
+        return [
+            index
+            for index in indices
+            if not (
+                (box := scan_lines[index].box)[0] > xmax + reach
+                or box[2] < xmin - reach
+                or box[1] > ymax + reach
+                or box[3] < ymin - reach
+            )
+        ]
+
     def _merge_associated(
-        self, scan_rows: list[list[list[float]]], associated: tuple[Association, ...], stamp: float
+        self,
+        scan_rows: Mapping[int, list[list[float]]],
+        associated: tuple[Association, ...],
+        stamp: float,
     ) -> set[int]:
         by_map: dict[int, list[int]] = {}
         for pair in associated:
@@ -721,9 +791,9 @@ class PolylineMap:
             )
         return set(by_map)
 
-    def _insert_new(self, new_lines: Mapping[int, Polyline], stamp: float) -> list[int]:
+    def _insert_new(self, new_lines: list[Polyline], stamp: float) -> list[int]:
         new_ids = []
-        for line in new_lines.values():
+        for line in new_lines:
             if self._keep is None or self._keep(line):
                 new_ids.append(self.add(line, stamp=stamp))
         return new_ids

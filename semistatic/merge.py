@@ -41,7 +41,7 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-from semistatic.association import bounding_boxes, box_gaps
+from semistatic.association import _near_boxes
 from semistatic.extraction import (
     PYTHON_DOUGLAS_PEUCKER,
     _douglas_peucker_rows,
@@ -561,15 +561,16 @@ def join(
     """
     lines = [as_polyline(polyline) for polyline in polylines]
     count = len(lines)
-    weight = np.ones(count) if weights is None else np.asarray(weights, dtype=float)
-    if weight.shape != (count,):
+    weight = [1.0] * count if weights is None else np.asarray(weights, dtype=float).tolist()
+    if np.shape(weight) != (count,):
         raise ValueError(
-            f"join: weights needs one value per polyline ({count}), got shape {weight.shape}"
+            f"join: weights needs one value per polyline ({count}), got shape {np.shape(weight)}"
         )
-    changed = np.ones(count, dtype=bool)
+    changed = [True] * count
     if candidates is not None:
-        changed = np.zeros(count, dtype=bool)
-        changed[np.asarray(candidates, dtype=np.int64)] = True
+        changed = [False] * count
+        for k in np.asarray(candidates, dtype=np.int64).reshape(-1).tolist():
+            changed[k] = True
     parent = list(range(count))
 
     def root(k: int) -> int:
@@ -579,10 +580,17 @@ def join(
         return k
 
     if count > 1:
-        boxes = bounding_boxes(lines)
-        near = box_gaps(boxes, boxes) <= gate
-        near &= changed[:, None] | changed[None, :]
-        for a, b in zip(*np.nonzero(np.triu(near, k=1)), strict=True):
+        boxes = [line.box for line in lines]
+        near = _near_boxes(boxes, boxes, gate)
+        # Pairs with a changed member only; the components do not depend on the order.
+        pairs = sorted(
+            (min(a, b), max(a, b))
+            for a in range(count)
+            if changed[a]
+            for b in range(count)
+            if b != a and near[a][b] and (b > a or not changed[b])
+        )
+        for a, b in pairs:
             if root(a) != root(b) and overlaps(lines[a], lines[b], gate, mode):
                 parent[root(b)] = root(a)
     groups: dict[int, list[int]] = {}

@@ -25,7 +25,10 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["Polyline", "as_polyline"]
+__all__ = ["EMPTY_BOX", "Polyline", "as_polyline"]
+
+EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
+"""The bounding box of no points: farther than anything from everything."""
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
@@ -115,14 +118,25 @@ class Polyline:
         """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid arrays.
 
         The arrays are frozen once and each polyline holds views of them (hot paths only,
-        as :meth:`_trusted`: a whole scan's polylines come out of one array).
+        as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
+        all non-empty runs are found in one pass and cached as their :attr:`box`.
         """
         points.flags.writeable = False
         scan_indices.flags.writeable = False
+        starts = bounds[:-1]
+        boxes = [EMPTY_BOX] * len(starts)
+        if points.shape[0] and all(a < b for a, b in itertools.pairwise(bounds)):
+            low = np.minimum.reduceat(points, starts, axis=0).tolist()
+            high = np.maximum.reduceat(points, starts, axis=0).tolist()
+            boxes = [(*a, *b) for a, b in zip(low, high, strict=True)]
         lines = []
-        for start, stop in itertools.pairwise(bounds):
+        for (start, stop), box in zip(itertools.pairwise(bounds), boxes, strict=True):
             line = object.__new__(cls)
-            line.__dict__.update(points=points[start:stop], scan_indices=scan_indices[start:stop])
+            line.__dict__.update(
+                points=points[start:stop], scan_indices=scan_indices[start:stop]
+            )
+            if box is not EMPTY_BOX:
+                line.__dict__["box"] = box
             lines.append(line)
         return lines
 
@@ -131,6 +145,22 @@ class Polyline:
 
     def __repr__(self) -> str:
         return f"Polyline({len(self)} vertices, length={self.length:.3f} m)"
+
+    @cached_property
+    def box(self) -> tuple[float, float, float, float]:
+        """Return the axis-aligned bounding box ``(xmin, ymin, xmax, ymax)`` (Python floats).
+
+        An empty polyline has the empty box ``(inf, inf, -inf, -inf)``.
+
+        Examples
+        --------
+        >>> Polyline([[0.0, 1.0], [2.0, -1.0]]).box
+        (0.0, -1.0, 2.0, 1.0)
+        """
+        if self.points.shape[0] == 0:
+            return EMPTY_BOX
+        xs, ys = self.points.T.tolist()
+        return (min(xs), min(ys), max(xs), max(ys))
 
     @cached_property
     def edge_lengths(self) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import itertools
 import math
 
 import numpy as np
@@ -20,8 +21,18 @@ import shapely
 
 from semistatic.association import FAR_COST, _optimal_path
 from semistatic.extraction import _douglas_peucker_rows
-from semistatic.mapper import MapPolyline, PolylineMap, _replaced, extend_ends
-from semistatic.polyline import Polyline
+from semistatic.frames import untransform_points
+from semistatic.local_map import LocalMap
+from semistatic.mapper import (
+    MapPolyline,
+    PolylineMap,
+    _replaced,
+    expected_ranges,
+    extend_ends,
+    visible_beams,
+)
+from semistatic.polyline import EMPTY_BOX, Polyline
+from semistatic.types import Scan
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
@@ -294,6 +305,8 @@ def test_mapper_with_all_fast_paths_off_gives_the_same_map(monkeypatch):
     monkeypatch.setattr(similarity_module, "PYTHON_VERTICES", 0)
     monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
     monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+    monkeypatch.setattr(association_module, "PYTHON_CCW_VERTICES", 0)
+    monkeypatch.setattr(association_module, "PYTHON_BOX_PAIRS", 0)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
         assert [(a.scan_index, a.map_id) for a in fast.associated] == [
@@ -424,3 +437,132 @@ def test_update_rejects_a_non_finite_pose():
     scan = cast_scan(_hall(), np.zeros(3))
     with pytest.raises(ValueError, match="pose must be a finite"):
         PolylineMap().update(scan, (0.0, math.nan, 0.0))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_polyline_boxes_equal_numpy_bounds(seed):
+    rng = np.random.default_rng(seed)
+    points = rng.normal(0.0, 3.0, (int(rng.integers(2, 30)), 2))
+    cuts = sorted(set(rng.integers(1, points.shape[0], 3).tolist()))
+    bounds = [0, *cuts, points.shape[0]]
+    lines = Polyline._split(points.copy(), np.arange(points.shape[0]), bounds)
+    for line, (start, stop) in zip(lines, itertools.pairwise(bounds), strict=True):
+        part = points[start:stop]
+        expected = (*part.min(axis=0).tolist(), *part.max(axis=0).tolist())
+        assert line.box == expected
+        assert Polyline(part).box == expected
+    assert Polyline(np.empty((0, 2))).box == EMPTY_BOX
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_ccw_summary_twin_equals_the_vectorised_one(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    lines = [
+        Polyline(rng.normal(0.0, 2.0, (int(rng.integers(1, 6)), 2)))
+        for _ in range(int(rng.integers(1, 5)))
+    ]
+    pose = np.array([*rng.normal(0.0, 0.5, 2), rng.uniform(-math.pi, math.pi)])
+    fast = association_module._ccw_summary(lines, pose)
+    monkeypatch.setattr(association_module, "PYTHON_CCW_VERTICES", 0)
+    slow = association_module._ccw_summary(lines, pose)
+    assert fast[1] == slow[1]
+    np.testing.assert_allclose(fast[0], slow[0], rtol=0.0, atol=ROUNDING)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_near_boxes_twin_equals_box_gaps(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    lines = [Polyline(rng.normal(0.0, 1.0, (2, 2)) * 0.3 + rng.normal(0.0, 1.0, 2))
+             for _ in range(6)] + [Polyline(np.empty((0, 2)))]
+    boxes = [line.box for line in lines]
+    gate = float(rng.uniform(0.05, 0.5))
+    expected = (association_module.box_gaps(boxes, boxes) <= gate).tolist()
+    assert association_module._near_boxes(boxes, boxes, gate) == expected
+    monkeypatch.setattr(association_module, "PYTHON_BOX_PAIRS", 0)
+    assert association_module._near_boxes(boxes, boxes, gate) == expected
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_visible_beams_in_the_sector_equal_all_beams(seed):
+    rng = np.random.default_rng(seed)
+    world = scene(box(tuple(rng.uniform(-3.0, 3.0, 2)), 1.0, 0.6, rng.uniform(0, 3)),
+                  wall((-4.0, 2.5), (4.0, 2.5)))
+    pose = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-math.pi, math.pi)])
+    scan = cast_scan(world, pose, noise=0.01, rng=rng)
+    # A polyline anywhere around the sensor, behind it (across the +-pi cut) included.
+    line = Polyline(rng.uniform(-4.0, 4.0, (int(rng.integers(2, 6)), 2)))
+    counts = visible_beams(line, scan, pose, margin=0.15)
+    expected = expected_ranges(untransform_points(pose, line.points), scan.angles())
+    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= scan.range_max)
+    with np.errstate(invalid="ignore"):
+        unoccluded = in_view & (scan.ranges >= expected - 0.15)
+        seen_through = unoccluded & (scan.ranges > expected + 0.15)
+    assert tuple(counts) == (in_view.sum(), unoccluded.sum(), seen_through.sum())
+
+
+def test_keep_box_prefilter_changes_nothing(monkeypatch):
+    rng = np.random.default_rng(5)
+    world = _hall()
+    area = [(2.0, -0.8), (3.2, -0.8), (3.2, 0.8), (2.0, 0.8)]  # around the wall x = 3
+    poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(8)]
+    scans = [cast_scan(world, pose, noise=0.01, rng=rng) for pose in poses]
+
+    def run():
+        local = LocalMap(safety_areas=[area])
+        reports = [local.update(scan, pose) for scan, pose in zip(scans, poses, strict=True)]
+        return local, reports
+
+    filtered, filtered_reports = run()
+    # Something is kept, and something is dropped by the box alone.
+    assert len(filtered) > 0
+    box_drops = [
+        set(r.unassociated) - set(filtered._map._maybe_kept(r.scan_polylines, r.unassociated))
+        for r in filtered_reports
+    ]
+    assert any(box_drops)
+    monkeypatch.setattr(PolylineMap, "_maybe_kept", lambda self, lines, indices: list(indices))
+    unfiltered, unfiltered_reports = run()
+    assert [r.new_ids for r in filtered_reports] == [r.new_ids for r in unfiltered_reports]
+    assert list(filtered.entries) == list(unfiltered.entries)
+    for map_id, entry in filtered.entries.items():
+        np.testing.assert_array_equal(entry.polyline.points, unfiltered[map_id].polyline.points)
+
+
+def test_update_with_polylines_extracted_by_another_map_is_the_same():
+    rng = np.random.default_rng(8)
+    world = _hall()
+    poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(6)]
+    scans = [cast_scan(world, pose, noise=0.01, rng=rng) for pose in poses]
+    builder, plain, reusing = PolylineMap(), PolylineMap(), PolylineMap()
+    for scan, pose in zip(scans, poses, strict=True):
+        report = builder.update(scan, pose)
+        expected = plain.update(scan, pose, merge=False)
+        reused = reusing.update(scan, pose, merge=False, scan_polylines=report.scan_polylines)
+        assert expected.associated == reused.associated
+        assert expected.missed_ids == reused.missed_ids
+        plain.update(scan, pose)
+        reusing.update(scan, pose, scan_polylines=report.scan_polylines)
+    assert [e.polyline.points.tolist() for e in plain] == [
+        e.polyline.points.tolist() for e in reusing
+    ]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_breakpoint_table_equals_the_adaptive_formula(seed):
+    rng = np.random.default_rng(seed)
+    ranges = rng.uniform(0.5, 6.0, 361)
+    ranges[rng.integers(0, 361, 40)] = np.inf  # gaps of one and more beams
+    scan = Scan(ranges=ranges, angle_min=-math.pi / 2, angle_increment=math.radians(0.5))
+    index = np.flatnonzero(np.isfinite(ranges))
+    x, y = extraction_module._end_points(scan, index)
+    lam, sigma_r = math.radians(float(rng.uniform(3.0, 15.0))), 0.01
+    step = np.diff(index)
+    dphi = step * scan.angle_increment
+    with np.errstate(divide="ignore", invalid="ignore"):
+        threshold = ranges[index[:-1]] * np.sin(dphi) / np.sin(lam - dphi) + 3.0 * sigma_r
+    jump = np.hypot(np.diff(x), np.diff(y))
+    expected = (step <= extraction_module.MAX_BRIDGED_GAP + 1) & (dphi < lam) & (jump <= threshold)
+    joined = extraction_module._joined(scan, index, x, y, lam, sigma_r)
+    np.testing.assert_array_equal(joined, expected)
+    assert joined.any()
+    assert not joined.all()
