@@ -23,6 +23,9 @@ __all__ = ["main"]
 
 EXIT_BAD_INPUT = 2
 
+# scenarios.bag.BAG_STORAGES, spelled out so that --help does not import rosbags.
+BAG_STORAGE_CHOICES = ("sqlite3", "mcap")
+
 
 class InputError(Exception):
     """Bad input the user can fix; printed as one ``error:`` line, exit status 2."""
@@ -50,6 +53,15 @@ def _parser() -> argparse.ArgumentParser:
         help="also run the other field policy on the same seed and compare lap times",
     )
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    run.add_argument(
+        "--bag", type=Path, metavar="DIR",
+        help="also write the run as a ROS 2 bag directory DIR (must not exist): scans, "
+             "odometry, EKF pose, tf and the map polylines, for RViz 2 or Foxglove",
+    )
+    run.add_argument(
+        "--bag-storage", choices=BAG_STORAGE_CHOICES, default="sqlite3",
+        help="storage of the --bag (default sqlite3, ROS 2 Humble's; mcap for Foxglove)",
+    )
 
     replay = commands.add_parser("replay", help="replay the mapper on a real laser log")
     replay.add_argument("log", type=Path, help="CARMEN log (.log, .gz) or ROS 1/2 bag")
@@ -57,6 +69,11 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument("--every", type=int, default=1, help="use one scan in N")
     replay.add_argument("--max-range", type=float, help="ignore readings beyond this (m)")
     replay.add_argument("--tile", type=float, default=8.0, help="side of a place (m)")
+    replay.add_argument(
+        "--align", action=argparse.BooleanOptionalAction, default=True,
+        help="align each revisit scan to its place's reference map before association, as a "
+             "robot localised on its map (default); --no-align keeps the logged poses",
+    )
     replay.add_argument("--lenient", action="store_true", help="skip and count malformed lines")
     replay.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="mapper.KEY=VALUE",
@@ -112,6 +129,7 @@ def _estimated_sim_time(spec, world) -> float:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from scenarios.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.outputs import summarize, write_outputs
     from scenarios.runner import run_scenario
 
@@ -122,8 +140,15 @@ def _run(args: argparse.Namespace) -> int:
         overrides.append(f"seed={args.seed}")
     spec, world = _load(args.scenario, overrides)
     out = args.out if args.out is not None else Path("results") / spec.name
+    recorder = None
+    if args.bag is not None:
+        try:
+            check_new_bag_path(args.bag, out=out)
+        except ValueError as error:
+            raise InputError(str(error)) from None
+        recorder = BagRecorder()
     with _progress(_estimated_sim_time(spec, world), f"{spec.name} ({spec.policy})") as bar:
-        log = run_scenario(spec, gui=args.gui, progress=bar)
+        log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder)
     comparison = None
     if args.compare:
         other = "adaptive" if spec.policy == "conservative" else "conservative"
@@ -132,7 +157,15 @@ def _run(args: argparse.Namespace) -> int:
             other_log = run_scenario(other_spec, progress=bar)
         comparison = summarize(other_log)
     metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison)
-    print(_run_summary(metrics, out))
+    summary = _run_summary(metrics, out)
+    if recorder is not None:
+        # After the outputs, so that a bag inside --out finds its parent directory.
+        write_run_bag(args.bag, recorder.frames, log.robot, storage=args.bag_storage)
+        summary += (
+            f"\nROS 2 bag in {args.bag}/ ({args.bag_storage}, {len(recorder.frames)} scans; "
+            f"topics {', '.join(BAG_TOPICS)})"
+        )
+    print(summary)
     return 0
 
 
@@ -239,7 +272,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     params = _replay_params(args.overrides, args.max_range)
     try:
-        options = ReplayOptions(params=params, every=args.every, tile_size=args.tile)
+        options = ReplayOptions(params=params, every=args.every, tile_size=args.tile,
+                                align=args.align)
     except ValueError as error:
         raise InputError(str(error)) from None
     if not args.log.exists():
@@ -254,11 +288,21 @@ def _replay(args: argparse.Namespace) -> int:
         raise InputError(str(error)) from None
     metrics = write_replay_outputs(result, out, log_name=name, figures=not args.no_figures)
     table, quality = metrics["table1_cm"], metrics["extraction"]
+    alignment = metrics["alignment"]
+    aligned = ""
+    if alignment is not None:
+        raw = alignment["table1_cm_log_pose"]["mean"]["avg"]
+        aligned = (
+            f"  aligned {alignment['accepted']}/{alignment['attempted']} revisit scans to the "
+            f"reference (median correction {alignment['translation_cm']['median']} cm, "
+            f"{alignment['rotation_deg']['median']} deg); at the logged poses: {raw} cm\n"
+        )
     print(
         f"{name}: {metrics['scans']} scans, {metrics['tiles']} places, "
         f"{metrics['revisit_scans']} revisit scans, {metrics['map_polylines']} map polylines\n"
         f"  revisit consistency (Table 1 mean of means): {table['mean']['avg']} cm over "
         f"{table['polylines']} polylines\n"
+        f"{aligned}"
         f"  extraction: {100 * quality['coverage']:.1f}% of valid readings within epsilon, "
         f"{quality['vertices_per_scan']:.1f} vertices/scan\n"
         f"  {metrics['performance']['wall_time_s']:.1f} s, "

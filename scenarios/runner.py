@@ -61,7 +61,7 @@ from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from worlds.spec import WorldSpec
 
-__all__ = ["LapLog", "RunLog", "Schedule", "known_objects", "run_scenario"]
+__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule", "known_objects", "run_scenario"]
 
 SETTLE_STEPS = 24
 """Physics steps the robot rests after being put back at the start (0.1 s at 240 Hz)."""
@@ -116,6 +116,47 @@ class LapLog:
     false_objects_from_people: int = 0
     latencies: dict[str, int | None] = field(default_factory=dict)
     person_stopped_robot: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class ScanRecord:
+    """What the robot knew when one safety-laser scan reached the mapper (for recording).
+
+    Parameters
+    ----------
+    lap
+        The lap, counted from 1.
+    segment
+        Name of the path segment whose local map the scan updated.
+    scan
+        The safety-laser scan; its ``pose`` is the simulator's true sensor pose.
+    odom_pose
+        ``(x, y, theta)`` of the robot from wheel odometry alone, world frame: the
+        increments the EKF predicts with, integrated from the triangulated pose at the
+        lap start, so it drifts as a real robot's odometry does.
+    ekf_pose, ekf_covariance
+        The EKF's robot pose (world frame) and its ``(3, 3)`` covariance over
+        ``(x, y, theta)``: the pose the mapper placed the scan with.
+    polylines
+        The current segment's local map after this scan, world frame, ``(N, 2)`` each.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=[1.0, 2.0], angle_min=0.0, angle_increment=0.1, stamp=0.5)
+    >>> record = ScanRecord(lap=1, segment="corridor", scan=scan, odom_pose=np.zeros(3),
+    ...                     ekf_pose=np.zeros(3), ekf_covariance=np.eye(3) * 1e-4,
+    ...                     polylines=(np.array([[0.0, 1.0], [2.0, 1.0]]),))
+    >>> record.segment, len(record.polylines)
+    ('corridor', 1)
+    """
+
+    lap: int
+    segment: str
+    scan: Scan
+    odom_pose: np.ndarray
+    ekf_pose: np.ndarray
+    ekf_covariance: np.ndarray
+    polylines: tuple[np.ndarray, ...] = ()
 
 
 @dataclass
@@ -201,11 +242,15 @@ def run_scenario(
     *,
     gui: bool = False,
     progress: Callable[[float], None] | None = None,
+    on_scan: Callable[[ScanRecord], None] | None = None,
 ) -> RunLog:
     """Run every lap of ``spec`` in a fresh PyBullet world and return the log.
 
     ``progress``, when given, is called with the simulated seconds advanced (for a
-    progress bar). Same spec (and seed) -> identical log, except the timing figures.
+    progress bar). ``on_scan``, when given, is called once per safety-laser scan, after
+    the local map update, with a :class:`ScanRecord` (e.g. to write a ROS 2 bag with
+    ``scenarios.bag``); without it the run pays nothing for recording. Same spec (and
+    seed) -> identical log and records, except the timing figures.
     """
     wall_start = time.perf_counter()
     rng = np.random.default_rng(spec.seed)
@@ -221,7 +266,7 @@ def run_scenario(
         robot = _Robot(sim, world, spec, robot_spec, path, rng)
         people = People(world)
         contacts = ContactMonitor(sim, robot.body.body_id, world)
-        loop = _Loop(sim, world, robot, people, contacts, spec, segments, log, progress)
+        loop = _Loop(sim, world, robot, people, contacts, spec, segments, log, progress, on_scan)
         for lap, lap_world in enumerate(worlds, start=1):
             _apply_layout(world, lap_world)
             loop.run_lap(lap)
@@ -248,11 +293,12 @@ def _apply_layout(world: SimWorld, layout: WorldSpec) -> None:
 class _Loop:
     """The per-step logic of a run, split from ``run_scenario`` to keep each part small."""
 
-    def __init__(self, sim, world, robot, people, contacts, spec, segments, log, progress):
+    def __init__(self, sim, world, robot, people, contacts, spec, segments, log, progress,
+                 on_scan):
         self.sim, self.world, self.robot = sim, world, robot
         self.people, self.contacts = people, contacts
         self.spec, self.segments, self.log = spec, segments, log
-        self.progress = progress
+        self.progress, self.on_scan = progress, on_scan
         rates = spec.rates
         self.control = Schedule(rates.control_hz, rates.physics_hz)
         self.localization = Schedule(rates.localization_hz, rates.physics_hz)
@@ -279,6 +325,8 @@ class _Loop:
         self.known_objects: dict[str, list[np.ndarray]] = {seg.name: [] for seg in segments}
         self.step_count = 0
         self.speed_scale = 1.0
+        # Wheel odometry alone (what /odom would carry), integrated beside the EKF.
+        self.odom_pose = np.zeros(3)
 
     # ------------------------------------------------------------------ lap
     def run_lap(self, lap: int) -> None:
@@ -293,6 +341,8 @@ class _Loop:
         self.speed_scale = 1.0
         lap_log = LapLog(lap=lap, start_time=sim.sim_time, first_tick=len(self.log.stamps))
         self._relocalize(lap)
+        # Like the EKF, odometry restarts from the triangulated pose: the robot was carried.
+        self.odom_pose = robot.ekf.pose.copy()
         if spec.policy == "adaptive":
             self.known_objects = {
                 name: known_objects(local_map) for name, local_map in self.local_maps.items()
@@ -368,6 +418,7 @@ class _Loop:
         increment = robot.encoders.odometry_increment(robot.body.wheel_angles())
         covariance = robot.encoders.increment_covariance(robot.encoders.last_tick_deltas)
         robot.ekf.predict(increment, covariance)
+        self.odom_pose = compose(self.odom_pose, increment)
 
     def _scan(self, laser: RaycastLaser, mount) -> Scan:
         scan = laser.scan(self.robot.body.sensor_pose(mount), stamp=self.sim.sim_time)
@@ -405,18 +456,38 @@ class _Loop:
 
         sensor_world = compose(robot.ekf.pose, robot.safety_mount.pose2d())
         started = time.perf_counter()
-        self.local_maps[segment.name].update(scan, sensor_world)
+        mapped = self.local_maps[segment.name].update(scan, sensor_world)
         self.log.mapper_seconds.append(time.perf_counter() - started)
+        if self.on_scan is not None:
+            self._report_scan(scan, lap, segment)
         if lap > 1:
             # Table 1: associate against the lap-1 reference without merging (paper Sec. 6).
             reference = self.reference[segment.name]
-            report = reference.update(scan, sensor_world, merge=False)
+            # Same segment frame, same scan: the polylines extracted for the local map serve.
+            report = reference.update(
+                scan, sensor_world, merge=False, scan_polylines=mapped.scan_polylines
+            )
             for pair in report.associated:
                 key = f"{segment.name}/{pair.map_id}"
                 self.log.table1_distances.setdefault(key, []).append(pair.distance)
                 if self.log.example_pair is None:
                     self._keep_example(report.scan_polylines[pair.scan_index],
                                        reference[pair.map_id].polyline, segment)
+
+    def _report_scan(self, scan: Scan, lap: int, segment: PathSegment) -> None:
+        robot = self.robot
+        polylines = self.local_maps[segment.name].world_polylines().values()
+        self.on_scan(
+            ScanRecord(
+                lap=lap,
+                segment=segment.name,
+                scan=scan,
+                odom_pose=self.odom_pose.copy(),
+                ekf_pose=robot.ekf.pose,  # the EKF returns copies
+                ekf_covariance=robot.ekf.covariance,
+                polylines=tuple(line.points for line in polylines),
+            )
+        )
 
     def _keep_example(self, scan_line: Polyline, map_line: Polyline, segment) -> None:
         if len(scan_line) >= 3 and len(map_line) >= 3:
