@@ -290,7 +290,7 @@ def _replay(args: argparse.Namespace) -> int:
     table, quality = metrics["table1_cm"], metrics["extraction"]
     alignment = metrics["alignment"]
     aligned = ""
-    if alignment is not None:
+    if alignment is not None and alignment["attempted"]:
         raw = alignment["table1_cm_log_pose"]["mean"]["avg"]
         aligned = (
             f"  aligned {alignment['accepted']}/{alignment['attempted']} revisit scans to the "
