@@ -17,6 +17,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from scenarios.tune import add_parser as add_tune_parser
+from scenarios.tune import main_tune
 from worlds.errors import SpecError
 
 __all__ = ["main"]
@@ -90,6 +92,7 @@ def _parser() -> argparse.ArgumentParser:
         "--compare", action="store_true",
         help="also run each scenario with adaptive fields and compare lap times",
     )
+    add_tune_parser(commands)
     return parser
 
 
@@ -315,7 +318,7 @@ def _replay(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``semistatic`` command line; return the exit status."""
     args = _parser().parse_args(argv)
-    handlers = {"run": _run, "table": _table, "replay": _replay}
+    handlers = {"run": _run, "table": _table, "replay": _replay, "tune": main_tune}
     try:
         return handlers[args.command](args)
     except (SpecError, InputError) as error:
