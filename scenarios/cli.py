@@ -78,6 +78,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     replay.add_argument("--lenient", action="store_true", help="skip and count malformed lines")
     replay.add_argument(
+        "--auto-noise", action="store_true",
+        help="fit epsilon (>= 3 sigma) and the breakpoint noise (>= sigma) to the range noise "
+             "measured on the first 50 scans",
+    )
+    replay.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="mapper.KEY=VALUE",
         help="override a mapper threshold, e.g. --set mapper.gate=0.15",
     )
@@ -276,7 +281,7 @@ def _replay(args: argparse.Namespace) -> int:
     params = _replay_params(args.overrides, args.max_range)
     try:
         options = ReplayOptions(params=params, every=args.every, tile_size=args.tile,
-                                align=args.align)
+                                align=args.align, auto_noise=args.auto_noise)
     except ValueError as error:
         raise InputError(str(error)) from None
     if not args.log.exists():
@@ -300,14 +305,17 @@ def _replay(args: argparse.Namespace) -> int:
             f"reference (median correction {alignment['translation_cm']['median']} cm, "
             f"{alignment['rotation_deg']['median']} deg); at the logged poses: {raw} cm\n"
         )
+    sigma_cm = metrics["noise"]["sigma_cm"]
+    noise = "unmeasured" if sigma_cm is None else f"{sigma_cm} cm"
     print(
         f"{name}: {metrics['scans']} scans, {metrics['tiles']} places, "
         f"{metrics['revisit_scans']} revisit scans, {metrics['map_polylines']} map polylines\n"
         f"  revisit consistency (Table 1 mean of means): {table['mean']['avg']} cm over "
         f"{table['polylines']} polylines\n"
         f"{aligned}"
-        f"  extraction: {100 * quality['coverage']:.1f}% of valid readings within epsilon, "
-        f"{quality['vertices_per_scan']:.1f} vertices/scan\n"
+        f"  extraction: {100 * quality['coverage']:.1f}% of valid readings within epsilon "
+        f"({100 * metrics['params']['epsilon_m']:.1f} cm), "
+        f"{quality['vertices_per_scan']:.1f} vertices/scan; range noise {noise}\n"
         f"  {metrics['performance']['wall_time_s']:.1f} s, "
         f"mapper {metrics['performance']['mapper_ms_median']} ms/scan\n"
         f"results in {out}/ (metrics.json, table1.csv, map.geojson, figures/)"

@@ -20,6 +20,13 @@ the correction statistics, in ``metrics.json``. Aligning does not shrink the fig
 itself: on a log whose poses are right it leaves Table 1 unchanged
 (``tests/scenarios/test_replay.py``).
 
+Logs differ in range noise (ACES about 3.5 times Intel's, 1.7 vs 0.5 cm across surfaces):
+:func:`estimate_range_noise` measures it on the first ``noise_scans`` scans and
+``metrics.json`` reports it. With ``auto_noise`` the thresholds that must sit above the
+noise follow it (:func:`noise_params`: Douglas-Peucker tolerance at least 3 sigma,
+breakpoint noise at least sigma), so that polylines simplify the shape, not the noise; on
+a log as quiet as the defaults assume it changes nothing.
+
 Examples
 --------
 >>> import numpy as np
@@ -35,6 +42,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -62,14 +70,36 @@ from semistatic.params import MapperParams
 from semistatic.types import Scan
 
 __all__ = [
+    "NOISE_EPSILON_SIGMAS",
+    "NOISE_SCANS",
     "REPLAY_ALIGNMENT",
     "REPLAY_PARAMS",
     "ReplayOptions",
     "ReplayResult",
+    "estimate_range_noise",
+    "noise_params",
     "open_log",
     "replay",
     "write_replay_outputs",
 ]
+
+NOISE_SCANS = 50
+"""Scans at the start of a log on which its range noise is measured (on the Intel and ACES
+logs the first 50 give 0.47 and 1.67 cm, all scans 0.50 and 1.75 cm)."""
+
+NOISE_EPSILON_SIGMAS = 3.0
+"""Douglas-Peucker tolerance in noise sigmas: a straight wall's reading lies beyond 3 sigma
+with probability 0.3 %, so noise alone seldom makes a vertex."""
+
+# Consecutive readings farther apart than this (m) lie on two surfaces (a depth jump), and
+# a triple with such a step is no sample of the noise. 0.3 m is the gap of one-degree beams
+# head-on at 17 m, or at 4 m at 75 deg incidence: beyond what the replay keeps.
+SAME_SURFACE_STEP = 0.3
+
+# The median of |N(0, s)| is 0.6745 s; the distance of a reading from the chord of its two
+# neighbours on a plane surface is e_i - (e_{i-1} + e_{i+1}) / 2: sqrt(1.5) times the noise.
+_MEDIAN_ABS_TO_SIGMA = 1.0 / 0.6744897501960817
+_CHORD_TO_READING = math.sqrt(1.5)
 
 REPLAY_PARAMS = MapperParams(
     breakpoint_lambda=math.radians(10.0),
@@ -95,7 +125,9 @@ class ReplayOptions:
     ``every`` keeps one scan in N; ``tile_size`` (m) is the side of a place; a tile's
     reference is frozen once the robot was away from it for ``revisit_gap`` seconds.
     ``align`` aligns each revisit scan to its tile's reference before association
-    (thresholds ``alignment``); the module docstring says why.
+    (thresholds ``alignment``); the module docstring says why. The range noise is
+    measured on the first ``noise_scans`` scans of the log; ``auto_noise`` fits
+    ``params`` to it with :func:`noise_params`.
     """
 
     params: MapperParams = REPLAY_PARAMS
@@ -105,6 +137,8 @@ class ReplayOptions:
     max_scans: int | None = None
     align: bool = True
     alignment: AlignmentParams = REPLAY_ALIGNMENT
+    auto_noise: bool = False
+    noise_scans: int = NOISE_SCANS
 
     def __post_init__(self) -> None:
         if not (isinstance(self.every, int) and self.every >= 1):
@@ -118,6 +152,15 @@ class ReplayOptions:
         if not isinstance(self.alignment, AlignmentParams):
             raise ValueError(
                 f"ReplayOptions.alignment must be an AlignmentParams, got {self.alignment!r}"
+            )
+        if not isinstance(self.auto_noise, bool):
+            raise ValueError(
+                f"ReplayOptions.auto_noise must be True or False, got {self.auto_noise!r}"
+            )
+        if not (isinstance(self.noise_scans, int) and self.noise_scans >= 1):
+            raise ValueError(
+                f"ReplayOptions.noise_scans must be an integer >= 1 (scans to measure the "
+                f"range noise on), got {self.noise_scans!r}"
             )
 
 
@@ -144,10 +187,15 @@ class ReplayResult:
     ``table1_distances`` are the restricted Hausdorff distances (m) of each reference
     polyline on revisits (at the aligned poses when ``options.align``);
     ``log_pose_distances`` the same at the logged poses (filled only when aligning);
-    ``alignments`` one :class:`~semistatic.alignment.Alignment` per revisit scan.
+    ``alignments`` one :class:`~semistatic.alignment.Alignment` per revisit scan;
+    ``noise_sigma`` the range noise measured on the first scans (m, ``nan`` if there was
+    nothing to measure) and ``params`` the thresholds used (``options.params``, fitted to
+    the noise when ``options.auto_noise``).
     """
 
     options: ReplayOptions
+    params: MapperParams | None = None
+    noise_sigma: float = math.nan
     scans: int = 0
     tiles: dict[tuple[int, int], _Tile] = field(default_factory=dict)
     table1_distances: dict[str, list[float]] = field(default_factory=dict)
@@ -164,6 +212,7 @@ class ReplayResult:
     def summary(self) -> dict:
         """Return the ``metrics.json`` content (the ``table1_cm`` schema of ``run``)."""
         quality = self.quality
+        params = self.options.params if self.params is None else self.params
         polylines = sum(len(tile.map) for tile in self.tiles.values())
         return {
             "scans": self.scans,
@@ -183,11 +232,23 @@ class ReplayResult:
                 "every": self.options.every,
                 "tile_size_m": self.options.tile_size,
                 "revisit_gap_s": self.options.revisit_gap,
-                "max_range_m": self.options.params.max_range,
-                "epsilon_m": self.options.params.epsilon,
-                "gate_m": self.options.params.gate,
-                "hausdorff_restriction": self.options.params.hausdorff_restriction,
+                "max_range_m": params.max_range,
+                "epsilon_m": round(params.epsilon, 6),
+                "breakpoint_sigma_r_m": round(params.breakpoint_sigma_r, 6),
+                "gate_m": params.gate,
+                "hausdorff_restriction": params.hausdorff_restriction,
                 "align": self.options.align,
+                "auto_noise": self.options.auto_noise,
+            },
+            "noise": {
+                "sigma_cm": (
+                    None if math.isnan(self.noise_sigma) else round(self.noise_sigma * 100.0, 4)
+                ),
+                "scans": self.options.noise_scans,
+                "rule": (
+                    f"epsilon >= {NOISE_EPSILON_SIGMAS:g} sigma, breakpoint_sigma_r >= sigma"
+                    if self.options.auto_noise else None
+                ),
             },
             "alignment": (
                 _alignment_summary(self.alignments, self.log_pose_distances)
@@ -245,6 +306,78 @@ def open_log(path: str | Path, *, lenient: bool = False,
     return read_carmen(path, lenient=lenient, stats=stats)
 
 
+def estimate_range_noise(scans: Iterable[Scan], params: MapperParams = REPLAY_PARAMS) -> float:
+    """Return the range noise sigma (m) of ``scans``, robust to corners and depth jumps.
+
+    For every three consecutive readings the mapper keeps (valid, within
+    ``params.max_range``, not outliers) that lie on one surface (each step shorter than
+    ``SAME_SURFACE_STEP``), the distance of the middle reading from the chord of the
+    other two; on a plane surface it is normal with sigma ``sqrt(1.5)`` times the noise
+    across the surface, so the noise is ``median / 0.6745 / sqrt(1.5)``. The median
+    ignores the minority of triples at corners and on curved objects. The noise is the
+    one across the surface, which is what the Douglas-Peucker tolerance is compared with.
+
+    Returns ``nan`` when no triple qualifies.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> angles = np.radians(np.arange(-60.0, 60.0, 1.0))
+    >>> rounds = [Scan(ranges=2.0 + rng.normal(0.0, 0.01, angles.size), angle_min=angles[0],
+    ...                angle_increment=np.radians(1.0)) for _ in range(20)]
+    >>> round(estimate_range_noise(rounds) * 100, 1)  # cm; a round wall seen from its centre
+    1.0
+    >>> estimate_range_noise([])
+    nan
+    """
+    distances = []
+    for scan in scans:
+        kept = np.flatnonzero(inlier_mask(scan, params))
+        middle = kept[1:-1][(np.diff(kept)[:-1] == 1) & (np.diff(kept)[1:] == 1)]
+        if middle.size == 0:
+            continue
+        points = scan.points()
+        before, at, after = points[middle - 1], points[middle], points[middle + 1]
+        chord, offset = after - before, at - before
+        length = np.hypot(chord[:, 0], chord[:, 1])
+        cross = np.abs(offset[:, 0] * chord[:, 1] - offset[:, 1] * chord[:, 0])
+        step_in = np.hypot(offset[:, 0], offset[:, 1])
+        step_out = np.hypot(*(after - at).T)
+        same = (step_in < SAME_SURFACE_STEP) & (step_out < SAME_SURFACE_STEP) & (length > 0.0)
+        distances.append(cross[same] / length[same])
+    if not distances or not (values := np.concatenate(distances)).size:
+        return math.nan
+    return float(np.median(values)) * _MEDIAN_ABS_TO_SIGMA / _CHORD_TO_READING
+
+
+def noise_params(params: MapperParams, sigma: float) -> MapperParams:
+    """Return ``params`` with the thresholds that must exceed the range noise fitted to it.
+
+    The Douglas-Peucker tolerance becomes ``max(epsilon, NOISE_EPSILON_SIGMAS * sigma)``:
+    below the noise it keeps noise extremes as vertices (zig-zag walls whose vertices lie
+    2 sigma off the surface). The breakpoint noise becomes ``max(breakpoint_sigma_r,
+    sigma)``. Neither is ever lowered, so a quiet log keeps ``params`` as they are; an
+    unknown (``nan``) sigma changes nothing.
+
+    Examples
+    --------
+    >>> noise_params(REPLAY_PARAMS, 0.005) is REPLAY_PARAMS  # Intel: 0.5 cm
+    True
+    >>> fitted = noise_params(REPLAY_PARAMS, 0.018)  # ACES: 1.8 cm
+    >>> round(fitted.epsilon, 3), fitted.breakpoint_sigma_r
+    (0.054, 0.03)
+    """
+    if math.isnan(sigma):
+        return params
+    if not sigma >= 0.0:
+        raise ValueError(f"noise_params: sigma must be >= 0 m or nan, got {sigma!r}")
+    epsilon = max(params.epsilon, NOISE_EPSILON_SIGMAS * sigma)
+    sigma_r = max(params.breakpoint_sigma_r, sigma)
+    if epsilon == params.epsilon and sigma_r == params.breakpoint_sigma_r:
+        return params
+    return params.replace(epsilon=epsilon, breakpoint_sigma_r=sigma_r)
+
+
 def _tile_key(position: np.ndarray, size: float) -> tuple[int, int]:
     return (math.floor(position[0] / size), math.floor(position[1] / size))
 
@@ -257,11 +390,14 @@ def replay(
 ) -> ReplayResult:
     """Run extraction, association, merge and join over ``scans`` into per-place maps."""
     options = ReplayOptions() if options is None else options
-    params = options.params
-    result = ReplayResult(options)
-    qualities = []
     started = time.perf_counter()
-    for index, scan in enumerate(scans):
+    scans = iter(scans)
+    first = list(itertools.islice(scans, options.noise_scans))
+    sigma = estimate_range_noise(first, options.params)
+    params = noise_params(options.params, sigma) if options.auto_noise else options.params
+    result = ReplayResult(options, params=params, noise_sigma=sigma)
+    qualities = []
+    for index, scan in enumerate(itertools.chain(first, scans)):
         if options.max_scans is not None and result.scans >= options.max_scans:
             break
         if index % options.every:

@@ -180,3 +180,16 @@ def test_cli_align_flag(capsys, tmp_path, flag):
     assert metrics["params"]["align"] is aligned
     assert ("at the logged poses" in stdout) is aligned
     assert (metrics["alignment"] is not None) is aligned
+
+
+@pytest.mark.parametrize("flag", ["--auto-noise", None])
+def test_cli_auto_noise_flag(capsys, tmp_path, flag):
+    log = tmp_path / "offset.log.gz"
+    write_carmen(synthetic_log(seed=4), log)
+    out = tmp_path / "replay"
+    args = ["replay", str(log), "--out", str(out), "--tile", "4", "--no-figures"]
+    assert main(args + ([flag] if flag else [])) == 0
+    assert "range noise" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["params"]["auto_noise"] is (flag is not None)
+    assert (metrics["noise"]["rule"] is not None) is (flag is not None)

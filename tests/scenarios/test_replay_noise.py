@@ -1,0 +1,166 @@
+"""The range noise of a log, and replay thresholds fitted to it (``auto_noise``).
+
+Synthetic logs from ``test_replay``: a room with boxes ray cast with CARMEN's 180
+one-degree beams and Gaussian range noise. The real-log checks at the end are marked slow
+(about 8 s for Intel and ACES) and skipped without ``../shared/data``.
+"""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios.replay import (
+    NOISE_EPSILON_SIGMAS,
+    REPLAY_PARAMS,
+    ReplayOptions,
+    estimate_range_noise,
+    noise_params,
+    open_log,
+    replay,
+)
+from semistatic.types import Scan
+from tests.scenarios.test_replay import OPTIONS, synthetic_log
+
+DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+AUTO = dataclasses.replace(OPTIONS, auto_noise=True)
+
+
+def without_run_details(summary):
+    """Return a summary without what differs between equivalent runs (timing, the flag)."""
+    summary = dict(summary)
+    summary.pop("performance")
+    summary["params"] = {k: v for k, v in summary["params"].items() if k != "auto_noise"}
+    summary["noise"] = {k: v for k, v in summary["noise"].items() if k != "rule"}
+    return summary
+
+
+@pytest.mark.parametrize("noise", [0.005, 0.01, 0.02])
+def test_noise_estimate_follows_the_range_noise(noise):
+    scans = synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=noise)[:50]
+    # Across the surface: range noise times the cosine of the incidence angle.
+    assert 0.7 * noise < estimate_range_noise(scans) < 1.0 * noise
+
+
+def test_corners_and_depth_jumps_are_not_noise():
+    # A noise-free room with boxes: every corner and occlusion edge is in the scans.
+    scans = synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0)[:50]
+    assert estimate_range_noise(scans) < 1e-4
+
+
+def test_round_wall_seen_from_its_centre_gives_the_range_noise():
+    rng = np.random.default_rng(7)
+    angles = np.radians(np.arange(-90.0, 90.0, 1.0))
+    scans = [Scan(ranges=3.0 + rng.normal(0.0, 0.02, angles.size), angle_min=angles[0],
+                  angle_increment=np.radians(1.0)) for _ in range(30)]
+    assert estimate_range_noise(scans) == pytest.approx(0.02, rel=0.1)
+
+
+@pytest.mark.parametrize(
+    "ranges",
+    [[], [np.inf] * 20, [2.0, np.inf, 2.0, np.inf, 2.0, np.inf], [1.0, 5.0, 1.0, 5.0, 1.0]],
+    ids=["no beams", "no returns", "no three in a row", "depth spikes"],
+)
+def test_nothing_to_measure_gives_nan(ranges):
+    scan = Scan(ranges=np.asarray(ranges, dtype=float), angle_min=0.0,
+                angle_increment=math.radians(1.0), range_max=50.0)
+    assert math.isnan(estimate_range_noise([scan]))
+    assert math.isnan(estimate_range_noise([]))
+
+
+def test_noise_params_raise_epsilon_and_breakpoint_noise_only_above_the_noise():
+    assert noise_params(REPLAY_PARAMS, 0.004) is REPLAY_PARAMS
+    assert noise_params(REPLAY_PARAMS, math.nan) is REPLAY_PARAMS
+    fitted = noise_params(REPLAY_PARAMS, 0.05)
+    assert fitted.epsilon == pytest.approx(NOISE_EPSILON_SIGMAS * 0.05)
+    assert fitted.breakpoint_sigma_r == pytest.approx(0.05)
+    # Nothing else moves.
+    assert fitted.replace(epsilon=REPLAY_PARAMS.epsilon,
+                          breakpoint_sigma_r=REPLAY_PARAMS.breakpoint_sigma_r) == REPLAY_PARAMS
+    loose = REPLAY_PARAMS.replace(epsilon=0.2)
+    assert noise_params(loose, 0.02).epsilon == 0.2  # never lowered
+
+
+def test_noise_params_reject_negative_sigma():
+    with pytest.raises(ValueError, match="noise_params: sigma"):
+        noise_params(REPLAY_PARAMS, -0.01)
+
+
+def test_auto_noise_leaves_a_quiet_log_alone():
+    scans = synthetic_log(seed=6, noise=0.005)
+    plain, auto = replay(scans, OPTIONS).summary(), replay(scans, AUTO).summary()
+    assert auto["params"]["epsilon_m"] == REPLAY_PARAMS.epsilon
+    assert without_run_details(auto) == without_run_details(plain)
+    assert auto["noise"]["rule"] is not None
+    assert plain["noise"]["rule"] is None
+
+
+def test_auto_noise_simplifies_the_noise_not_the_shape():
+    scans = synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.02)
+    clean = replay(synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0), OPTIONS).summary()
+    plain, auto = replay(scans, OPTIONS).summary(), replay(scans, AUTO).summary()
+    sigma = auto["noise"]["sigma_cm"] / 100.0
+    assert auto["params"]["epsilon_m"] == pytest.approx(NOISE_EPSILON_SIGMAS * sigma, abs=1e-5)
+    # At 3 cm the polylines follow the noise: several times the vertices of the noise-free
+    # room. Fitted to the noise they keep the room's corners and little else.
+    vertices = {name: s["extraction"]["vertices_per_scan"]
+                for name, s in (("clean", clean), ("plain", plain), ("auto", auto))}
+    assert vertices["plain"] > 4 * vertices["clean"]
+    assert vertices["clean"] <= vertices["auto"] < 0.5 * vertices["plain"]
+    assert auto["extraction"]["coverage"] > 0.95
+    assert auto["extraction"]["rms_distance_m"] < sigma * 1.5
+
+
+def test_noise_is_reported_without_auto_noise():
+    summary = replay(synthetic_log(seed=6, noise=0.01), OPTIONS).summary()
+    assert summary["noise"]["scans"] == OPTIONS.noise_scans
+    assert 0.7 < summary["noise"]["sigma_cm"] < 1.0
+    assert summary["params"]["auto_noise"] is False
+
+
+@pytest.mark.parametrize("noise_scans", [1, 7, 10_000])
+def test_every_scan_is_replayed_whatever_the_noise_sample(noise_scans):
+    scans = synthetic_log(seed=6)
+    options = dataclasses.replace(OPTIONS, noise_scans=noise_scans)
+    reference = replay(scans, OPTIONS).summary()
+    summary = replay(iter(scans), options).summary()  # a stream, as open_log gives
+    assert summary["scans"] == len(scans)
+    assert summary["table1_cm"] == reference["table1_cm"]
+    limited = replay(iter(scans), dataclasses.replace(options, max_scans=5, every=2))
+    assert limited.scans == 5
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"auto_noise": 1}, "ReplayOptions.auto_noise"),
+        ({"noise_scans": 0}, "ReplayOptions.noise_scans"),
+        ({"noise_scans": 2.5}, "ReplayOptions.noise_scans"),
+    ],
+)
+def test_noise_options_are_validated(changes, message):
+    with pytest.raises(ValueError, match=message):
+        ReplayOptions(**changes)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not DATA.is_dir(), reason=f"no real logs in {DATA}")
+@pytest.mark.parametrize(
+    ("log", "sigma_cm", "epsilon_m", "table1_cm"),
+    [
+        # Intel is as quiet as the defaults assume: nothing changes (4.70 cm either way).
+        ("intel", (0.4, 0.6), (0.03, 0.03), (4.4, 5.0)),
+        # ACES: 1.67 cm noise, epsilon 5.0 cm; 6.10 -> 5.88 cm, still not under 5 cm.
+        ("aces", (1.5, 2.0), (0.045, 0.06), (5.4, 6.05)),
+    ],
+)
+def test_real_logs_with_auto_noise(log, sigma_cm, epsilon_m, table1_cm):
+    summary = replay(open_log(DATA / f"{log}-corrected.log.gz"),
+                     ReplayOptions(auto_noise=True)).summary()
+    assert sigma_cm[0] < summary["noise"]["sigma_cm"] < sigma_cm[1]
+    assert epsilon_m[0] <= summary["params"]["epsilon_m"] <= epsilon_m[1]
+    assert table1_cm[0] < summary["table1_cm"]["mean"]["avg"] < table1_cm[1]
+    assert summary["extraction"]["coverage"] > 0.95
+    assert summary["extraction"]["vertices_per_scan"] < 35  # ACES without: 54.7
