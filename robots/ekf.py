@@ -61,9 +61,9 @@ from numpy.typing import ArrayLike
 from robots.landmarks import (
     CHI2_2DOF_99,
     LandmarkObservation,
-    mahalanobis_matrix,
+    _mahalanobis_rows,
+    _range_bearing_rows,
     pairs_inside_gate,
-    range_bearing_model,
 )
 from robots.triangulation import DEFAULT_MIN_RELIABILITY, TriangulationError, triangulate
 from semistatic.frames import wrap_angle
@@ -82,9 +82,6 @@ _MAX_HYPOTHESIS_OBSERVATIONS = 6
 
 # Minimum matched posts for a re-localisation (three object triangulation).
 _MIN_TRIANGULATION_POSTS = 3
-
-# Jacobian of one (range, bearing) observation with respect to the range bias.
-_BIAS_JACOBIAN = np.array([1.0, 0.0])
 
 
 def _residual(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
@@ -262,12 +259,14 @@ class _CompoundingEKF(ExtendedKalmanFilter):
     """filterpy EKF whose state prediction compounds the odometry increment."""
 
     def predict_x(self, u: np.ndarray = 0) -> None:
-        x, y, theta = self.x[0, 0], self.x[1, 0], self.x[2, 0]
+        # Python floats: the same IEEE operations as on numpy scalars, without their cost.
+        x, y, theta = self.x[:3, 0].tolist()
+        dx, dy, dtheta = u.tolist()
         c, s = math.cos(theta), math.sin(theta)
         state = self.x.copy()  # a range-bias row, if any, is constant during prediction
-        state[0, 0] = x + c * u[0] - s * u[1]
-        state[1, 0] = y + s * u[0] + c * u[1]
-        state[2, 0] = wrap_angle(theta + u[2])
+        state[0, 0] = x + c * dx - s * dy
+        state[1, 0] = y + s * dx + c * dy
+        state[2, 0] = wrap_angle(theta + dtheta)
         self.x = state
 
 
@@ -331,9 +330,13 @@ class EKFLocalizer:
             self.landmarks[:, None, :] - self.landmarks[None, :, :], axis=-1
         )
         self._mount = np.array(self.params.mount)
+        # The landmark coordinates as the per-update range-bearing model takes them.
+        self._landmark_x = np.ascontiguousarray(self.landmarks[:, 0])
+        self._landmark_y = np.ascontiguousarray(self.landmarks[:, 1])
         # The state is (x, y, theta) or, with a range-bias state, (x, y, theta, b).
         self._has_bias = self.params.range_bias_sigma > 0.0
         self._dim = 4 if self._has_bias else 3
+        self._identity = np.eye(self._dim)
         self._filter = _CompoundingEKF(dim_x=self._dim, dim_z=2)
         if self._has_bias:
             self._filter.P[3, 3] = self.params.range_bias_sigma**2
@@ -435,13 +438,14 @@ class EKFLocalizer:
             if increment_cov is None
             else np.asarray(increment_cov, dtype=float)
         )
-        theta = self._filter.x[2, 0]
+        dx, dy, _ = u.tolist()
+        theta = float(self._filter.x[2, 0])
         c, s = math.cos(theta), math.sin(theta)
         # The bias (if any) is untouched by driving: identity row/column in F, none in Q
         # (its random walk is added by time, at the updates).
-        state_jacobian = np.eye(self._dim)
-        state_jacobian[0, 2] = -s * u[0] - c * u[1]
-        state_jacobian[1, 2] = c * u[0] - s * u[1]
+        state_jacobian = self._identity.copy()
+        state_jacobian[0, 2] = -s * dx - c * dy
+        state_jacobian[1, 2] = c * dx - s * dy
         self._filter.F = state_jacobian
         increment_jacobian = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         pose_noise = increment_jacobian @ sigma_u @ increment_jacobian.T
@@ -484,28 +488,31 @@ class EKFLocalizer:
         if not self.initialized or not observations:
             return []
         prior = self._filter.x[:3, 0].copy()
-        predicted, jacobians = range_bearing_model(prior, self.landmarks, self._mount)
+        x, y, theta = prior.tolist()
+        predicted, jacobians = _range_bearing_rows(
+            x, y, theta, self.params.mount, self._landmark_x, self._landmark_y, self._dim
+        )
         if self._has_bias:
             # range = |post - sensor| + b: d(range)/db = 1, d(bearing)/db = 0.
             predicted[:, 0] += self._filter.x[3, 0]
-            pose_jacobians = jacobians
-            jacobians = np.empty((pose_jacobians.shape[0], 2, 4))
-            jacobians[:, :, :3] = pose_jacobians
-            jacobians[:, :, 3] = _BIAS_JACOBIAN
-        nis = mahalanobis_matrix(observations, predicted, jacobians, self._filter.P)
+            jacobians[:, 0, 3] = 1.0
+        # Every observation's measurement and noise, stacked once for the gate and the update.
+        measured_all = np.array([(obs.range, obs.bearing) for obs in observations])
+        noise_all = np.array([obs.covariance for obs in observations])
+        nis = _mahalanobis_rows(measured_all, noise_all, predicted, jacobians, self._filter.P)
         pairs = pairs_inside_gate(nis, self.params.nis_gate)
         if not pairs:
             return []
         obs_index = [k for k, _ in pairs]
         landmark_index = [m for _, m in pairs]
-        measured = np.array(
-            [(observations[k].range, observations[k].bearing) for k in obs_index]
-        ).reshape(-1, 1)
+        measured = measured_all[obs_index].reshape(-1, 1)
         expected = predicted[landmark_index].reshape(-1, 1)
         jacobian = jacobians[landmark_index].reshape(-1, self._dim)
-        noise = np.zeros((2 * len(pairs), 2 * len(pairs)))
-        for row, k in enumerate(obs_index):
-            noise[2 * row : 2 * row + 2, 2 * row : 2 * row + 2] = observations[k].covariance
+        count = len(pairs)
+        noise = np.zeros((2 * count, 2 * count))
+        # The (count, 2, count, 2) view's diagonal blocks are the per-observation noises.
+        blocks = np.arange(count)
+        noise.reshape(count, 2, count, 2)[blocks, :, blocks, :] = noise_all[obs_index]
         self._filter.update(
             measured,
             lambda _x: jacobian,
@@ -513,11 +520,12 @@ class EKFLocalizer:
             R=noise,
             residual=_residual,
         )
-        self._filter.x[2, 0] = wrap_angle(self._filter.x[2, 0])
+        self._filter.x[2, 0] = wrap_angle(float(self._filter.x[2, 0]))
         self._filter.P = self._repair_covariance(self._filter.P)
         self.last_update_stamp = stamp
         if self.params.record_history:
-            self._record(stamp, prior, landmark_index, [nis[k, m] for k, m in pairs], False)
+            used_nis = nis[obs_index, landmark_index].tolist()
+            self._record(stamp, prior, landmark_index, used_nis, False)
         return pairs
 
     def step(
@@ -696,21 +704,22 @@ class EKFLocalizer:
         reinitialized: bool,
     ) -> None:
         """Append the correction just applied to ``history``."""
-        posterior = self._filter.x[:3, 0].copy()
+        state, covariance = self._filter.x, self._filter.P
+        posterior = state[:3, 0].copy()
         correction = posterior - prior
-        correction[2] = wrap_angle(correction[2])
+        correction[2] = wrap_angle(float(correction[2]))
         self.history.append(
             EKFRecord(
-                stamp=stamp,
-                prior=prior,
-                posterior=posterior,
-                correction=correction,
-                sigma=np.sqrt(np.diag(self._filter.P)[:3]),
-                landmarks=tuple(landmarks),
-                nis=tuple(float(v) for v in nis),
-                reinitialized=reinitialized,
-                range_bias=self.range_bias,
-                range_bias_sigma=self.range_bias_sigma,
+                stamp,
+                prior,
+                posterior,
+                correction,
+                np.sqrt(covariance.diagonal()[:3]),
+                tuple(landmarks),
+                tuple(map(float, nis)),
+                reinitialized,
+                float(state[3, 0]) if self._has_bias else 0.0,
+                math.sqrt(covariance[3, 3]) if self._has_bias else 0.0,
             )
         )
 

@@ -212,17 +212,25 @@ class ChainedFormFollower:
         >>> [round(float(e), 3) for e in follower.errors([0.5, 0.2, 0.1])]
         [0.02, 0.199, 0.1]
         """
-        pose = np.asarray(pose, dtype=float)
-        return self._errors(pose, self._project(pose))
+        x, y, theta = np.asarray(pose, dtype=float)[:3].tolist()
+        x_ref, y_ref, theta_ref, _ = self._reference(self._track(x, y))
+        return self._offset(x, y, theta, x_ref, y_ref, theta_ref)
 
-    def _project(self, pose: np.ndarray) -> float:
-        return self.path.project(
-            pose[:2], s_hint=self.progress, window=self.params.projection_window
-        )
+    # The three path queries of a command, on floats (they run at the control rate); a
+    # test subclass routes them through the array code paths to check the floats' bits.
+    def _track(self, x: float, y: float) -> float:
+        """Return ``path.project((x, y))`` searched around the current progress."""
+        return self.path._track(x, y, self.progress, float(self.params.projection_window))
 
-    def _errors(self, pose: np.ndarray, s: float) -> tuple[float, float, float]:
-        x_ref, y_ref, theta_ref = self.path.pose(s).tolist()
-        x, y, theta = pose[:3].tolist()
+    def _reference(self, s: float) -> tuple[float, float, float, float]:
+        """Return the path pose ``(x, y, heading)`` at ``s`` and its curvature."""
+        return self.path._pose_and_curvature(s)
+
+    @staticmethod
+    def _offset(
+        x: float, y: float, theta: float, x_ref: float, y_ref: float, theta_ref: float
+    ) -> tuple[float, float, float]:
+        """Return ``(xe, ye, theta_e)``: the pose's offset from the reference, robot frame."""
         dx, dy = x - x_ref, y - y_ref
         c, s_theta = math.cos(theta), math.sin(theta)
         xe = c * dx + s_theta * dy
@@ -260,9 +268,9 @@ class ChainedFormFollower:
             raise ValueError(
                 f"ChainedFormFollower.command: speed_scale must be in [0, 1], got {speed_scale}"
             )
-        pose = np.asarray(pose, dtype=float)
+        x, y, theta = np.asarray(pose, dtype=float)[:3].tolist()
         params = self.params
-        self.progress = self._project(pose)
+        self.progress = self._track(x, y)
         remaining = self.path.length - self.progress
         if remaining <= params.goal_tolerance:
             self.done = True
@@ -272,8 +280,10 @@ class ChainedFormFollower:
         # Brake profile: never faster than the speed from which the robot can still stop
         # at the path end with max_deceleration.
         u1r = min(params.speed * speed_scale, math.sqrt(2.0 * params.max_deceleration * remaining))
-        u2r = self.path.curvature(self.progress) * u1r
-        xe, ye, theta_e = self._errors(pose, self.progress)
+        # The reference pose and curvature from one spline evaluation (as pose + curvature).
+        x_ref, y_ref, theta_ref, curvature = self._reference(self.progress)
+        u2r = curvature * u1r
+        xe, ye, theta_e = self._offset(x, y, theta, x_ref, y_ref, theta_ref)
         theta_e = min(max(theta_e, -MAX_HEADING_ERROR), MAX_HEADING_ERROR)
         v = u1r - params.k1 * abs(u1r) * xe
         omega = u2r - params.k2 * u1r * ye - params.k3 * abs(u1r) * math.tan(theta_e)

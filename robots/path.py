@@ -167,6 +167,9 @@ class SplinePath:
         self._coarse_t_list = self._coarse_t.tolist()
         self._coarse_x = np.ascontiguousarray(self._coarse_points[:, 0])
         self._coarse_y = np.ascontiguousarray(self._coarse_points[:, 1])
+        # The spline and its derivatives at every coarse sample, where the one-point
+        # projection's brackets mostly end: looked up instead of evaluated per query.
+        self._coarse_spline = [self._spline_scalar.evaluate(t) for t in self._coarse_t_list]
 
     def __repr__(self) -> str:
         return (
@@ -375,49 +378,79 @@ class SplinePath:
         s = np.minimum(np.maximum(s, lo), hi)
         return float(s[0]) if single else s
 
+    def _track(self, x: float, y: float, s_hint: float, window: float) -> float:
+        """Return ``project((x, y), s_hint, window)`` for floats (the follower's 50 Hz call).
+
+        The same window and validation as ``project``, without its array handling.
+        """
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
+        if not window > 0.0:
+            raise ValueError(f"SplinePath.project: window must be > 0 m, got {window}")
+        centre = min(max(s_hint, 0.0), self.length)
+        lo, hi = max(0.0, centre - window), min(self.length, centre + window)
+        return self._project_one(x, y, lo, hi)
+
+    def _pose_and_curvature(self, s: float) -> tuple[float, float, float, float]:
+        """Return ``(*pose(s), curvature(s))`` for one finite float ``s``, one evaluation.
+
+        The expressions of ``pose`` and ``curvature``, so the same values to the last bit.
+        """
+        x, y, dx, dy, ddx, ddy = self._spline_scalar.evaluate(self._t_one(s))
+        # numpy's atan2, hypot and power, not math's: they round differently in the last bit.
+        heading = float(np.arctan2(dy, dx))
+        return x, y, heading, float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
+
     def _project_one(self, x: float, y: float, lo: float, hi: float) -> float:
         """Project one point: the same seeds, brackets and iterations as the array path.
 
         A scalar transcription of ``_seed_projection`` + ``_refine_projection`` (the same
         float operations in the same order, so the same result to the last bit) that
         skips numpy's overhead on arrays of three rows: this runs at the control rate.
+        The spline at the coarse samples, where most brackets end, is looked up.
         """
-        spline = self._spline_scalar
+        evaluate = self._spline_scalar.evaluate
         # Seeds: the coarse samples strictly inside (lo, hi), framed by the window ends.
         first = bisect.bisect_right(self._coarse_s_list, lo)
         last = bisect.bisect_left(self._coarse_s_list, hi, lo=first)
         t_lo, t_hi = self._t_one(lo), self._t_one(hi)
-        x_lo, y_lo = spline.evaluate(t_lo)[:2]
-        x_hi, y_hi = spline.evaluate(t_hi)[:2]
+        at_lo, at_hi = evaluate(t_lo), evaluate(t_hi)
         candidates = [t_lo, *self._coarse_t_list[first:last], t_hi]
-        inner = (
-            (x - self._coarse_x[first:last]) ** 2 + (y - self._coarse_y[first:last]) ** 2
-        ).tolist()
+        samples = [at_lo, *self._coarse_spline[first:last], at_hi]
+        count = len(candidates)
         # Products, not ``** 2``: numpy squares by multiplying, C's pow() may round otherwise.
-        distance = [_square_sum(x - x_lo, y - y_lo), *inner, _square_sum(x - x_hi, y - y_hi)]
-        count = len(distance)
-        minima = [
-            k
-            for k in range(count)
-            if (k == 0 or distance[k] <= distance[k - 1])
-            and (k == count - 1 or distance[k] <= distance[k + 1])
-        ]
+        distance = np.empty(count)
+        distance[0] = _square_sum(x - at_lo[0], y - at_lo[1])
+        distance[-1] = _square_sum(x - at_hi[0], y - at_hi[1])
+        distance[1:-1] = (x - self._coarse_x[first:last]) ** 2 + (
+            y - self._coarse_y[first:last]
+        ) ** 2
+        # Local minima (ends compare with their one neighbour), as the array path finds them.
+        minimum = np.ones(count, dtype=bool)
+        minimum[1:] &= distance[1:] <= distance[:-1]
+        minimum[:-1] &= distance[:-1] <= distance[1:]
+        minima = np.flatnonzero(minimum).tolist()
+        distance_list = distance.tolist()
         # A stable sort of the local minima by distance, then (as the array path's stable
         # argsort ranks every other sample at +inf) the first non-minima in scan order.
-        basins = sorted(minima, key=distance.__getitem__)[:PROJECTION_BASINS]
+        basins = sorted(minima, key=distance_list.__getitem__)[:PROJECTION_BASINS]
         wanted = min(PROJECTION_BASINS, count)
         if len(basins) < wanted:
             chosen = set(minima)
-            basins += [k for k in range(count) if k not in chosen][: wanted - len(basins)]
+            extra = (k for k in range(count) if k not in chosen)
+            basins += [next(extra) for _ in range(wanted - len(basins))]
         seeds = [candidates[k] for k in basins]
         lows = [candidates[max(k - 1, 0)] for k in basins]
         highs = [candidates[min(k + 1, count - 1)] for k in basins]
 
         # Refinement: safeguarded Newton on all basins in lock step (as the array path).
         t_values, positions, active = [], [], []
-        for seed, low, high in zip(seeds, lows, highs, strict=True):
-            slope_low, _, position_low = self._distance_slope_one(low, x, y)
-            slope_high, _, position_high = self._distance_slope_one(high, x, y)
+        for k, seed, low, high in zip(basins, seeds, lows, highs, strict=True):
+            # _distance_slope_one at the bracket ends, from the samples evaluated above.
+            px, py, dx, dy, _, _ = samples[max(k - 1, 0)]
+            slope_low, position_low = (px - x) * dx + (py - y) * dy, (px, py)
+            px, py, dx, dy, _, _ = samples[min(k + 1, count - 1)]
+            slope_high, position_high = (px - x) * dx + (py - y) * dy, (px, py)
             at_low, at_high = slope_low >= 0.0, slope_high <= 0.0
             active.append(not at_low and not at_high)
             t_values.append(low if at_low else (high if at_high else seed))
@@ -429,8 +462,11 @@ class SplinePath:
             for b, t in enumerate(t_values):
                 if not active[b]:
                     continue
-                slope, second, here = self._distance_slope_one(t, x, y)
-                positions[b] = here
+                px, py, dx, dy, ddx, ddy = evaluate(t)
+                ox, oy = px - x, py - y
+                slope = ox * dx + oy * dy
+                second = (dx * dx + dy * dy) + (ox * ddx + oy * ddy)
+                positions[b] = (px, py)
                 if slope < 0.0:
                     lows[b] = t
                 if slope > 0.0:
@@ -444,7 +480,7 @@ class SplinePath:
                 break
             t_values = [t + step for t, step in zip(t_values, steps, strict=True)]
         else:
-            positions = [spline.evaluate(t)[:2] for t in t_values]
+            positions = [evaluate(t)[:2] for t in t_values]
         gaps = [_square_sum(px - x, py - y) for px, py in positions]
         t_best = t_values[gaps.index(min(gaps))]
         return min(max(self._t_to_s_scalar.value(t_best), lo), hi)
@@ -562,26 +598,44 @@ class _ScalarCubic:
         self.last_piece = len(self.breaks) - 2
         # One flat tuple per piece: (c3, c2, c1, c0), or (c3x, c3y, c2x, ..., c0y).
         self.pieces = [tuple(piece.ravel().tolist()) for piece in np.moveaxis(coefficients, 1, 0)]
-
-    def _piece(self, x: float) -> tuple[float, tuple[float, ...]]:
-        piece = min(max(bisect.bisect_right(self.breaks, x) - 1, 0), self.last_piece)
-        return x - self.breaks[piece], self.pieces[piece]
+        if coefficients.ndim == 3:
+            # For ``evaluate``: the piece's start and the products by 3, 2 and 6 that the
+            # derivatives begin with (``3.0 * c3 * h`` is ``(3.0 * c3) * h``: same bits).
+            self._expanded = [
+                (
+                    start,
+                    *piece,
+                    *(3.0 * c for c in piece[:2]),
+                    *(2.0 * c for c in piece[2:4]),
+                    *(6.0 * c for c in piece[:2]),
+                )
+                for start, piece in zip(self.breaks, self.pieces, strict=False)
+            ]
 
     def value(self, x: float) -> float:
         """Return the value of a scalar-valued cubic at ``x``."""
-        h, (c3, c2, c1, c0) = self._piece(x)
+        # The piece holding x, clamped to the first and last (see ``evaluate``).
+        piece = bisect.bisect_right(self.breaks, x, 1, self.last_piece + 1) - 1
+        c3, c2, c1, c0 = self.pieces[piece]
+        h = x - self.breaks[piece]
         return ((c3 * h + c2) * h + c1) * h + c0
 
     def evaluate(self, x: float) -> tuple[float, float, float, float, float, float]:
         """Return ``(x, y, x', y', x'', y'')`` of a 2-vector-valued cubic at ``x``."""
-        h, (c3x, c3y, c2x, c2y, c1x, c1y, c0x, c0y) = self._piece(x)
+        # The piece holding x, clamped as _evaluate_cubic clamps: searching breaks[1:-1]
+        # gives piece 0 below the second break and the last piece from the last inner one.
+        piece = bisect.bisect_right(self.breaks, x, 1, self.last_piece + 1) - 1
+        start, c3x, c3y, c2x, c2y, c1x, c1y, c0x, c0y, t3x, t3y, t2x, t2y, s3x, s3y = (
+            self._expanded[piece]
+        )
+        h = x - start
         return (
             ((c3x * h + c2x) * h + c1x) * h + c0x,
             ((c3y * h + c2y) * h + c1y) * h + c0y,
-            (3.0 * c3x * h + 2.0 * c2x) * h + c1x,
-            (3.0 * c3y * h + 2.0 * c2y) * h + c1y,
-            6.0 * c3x * h + 2.0 * c2x,
-            6.0 * c3y * h + 2.0 * c2y,
+            (t3x * h + t2x) * h + c1x,
+            (t3y * h + t2y) * h + c1y,
+            s3x * h + t2x,
+            s3y * h + t2y,
         )
 
 

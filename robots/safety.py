@@ -34,6 +34,7 @@ SafetyOutput(speed_scale=0.0, zone='protective')
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -109,6 +110,9 @@ class FieldSet:
     name: str = ""
     warning_polygon: shapely.Polygon = field(init=False, repr=False)
     protective_polygon: shapely.Polygon = field(init=False, repr=False)
+    # (x_min, y_min, x_max, y_max) of each polygon, for the occupancy test's first pass.
+    warning_bounds: tuple[float, ...] = field(init=False, repr=False)
+    protective_bounds: tuple[float, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         warning = _polygon_vertices("warning", self.warning)
@@ -127,6 +131,8 @@ class FieldSet:
         object.__setattr__(self, "protective", protective)
         object.__setattr__(self, "warning_polygon", warning_polygon)
         object.__setattr__(self, "protective_polygon", protective_polygon)
+        object.__setattr__(self, "warning_bounds", tuple(warning_polygon.bounds))
+        object.__setattr__(self, "protective_bounds", tuple(protective_polygon.bounds))
 
 
 @dataclass(frozen=True)
@@ -199,11 +205,30 @@ def field_occupancy(points_robot: ArrayLike, field_set: FieldSet, min_points: in
         raise ValueError(f"field_occupancy: min_points must be an integer >= 1, got {min_points}")
     points = np.asarray(points_robot, dtype=float).reshape(-1, 2)
     x, y = points[:, 0], points[:, 1]
-    warning = shapely.intersects_xy(field_set.warning_polygon, x, y)
-    protective = shapely.intersects_xy(field_set.protective_polygon, x, y)
     return FieldState(
-        int(np.count_nonzero(warning)), int(np.count_nonzero(protective)), int(min_points)
+        _count_inside(field_set.warning_polygon, field_set.warning_bounds, x, y),
+        _count_inside(field_set.protective_polygon, field_set.protective_bounds, x, y),
+        int(min_points),
     )
+
+
+def _count_inside(
+    polygon: shapely.Polygon, bounds: tuple[float, ...], x: np.ndarray, y: np.ndarray
+) -> int:
+    """Return how many points intersect ``polygon``, testing only those in its bounding box.
+
+    A scan has hundreds of points and a field holds a few: comparing coordinates with
+    the (closed) bounding box first leaves the exact predicate a handful to check, with
+    the same count (a point outside the box cannot touch the polygon; nan never is in).
+    """
+    x_min, y_min, x_max, y_max = bounds
+    near = x >= x_min
+    near &= x <= x_max
+    near &= y >= y_min
+    near &= y <= y_max
+    if not near.any():
+        return 0
+    return int(np.count_nonzero(shapely.intersects_xy(polygon, x[near], y[near])))
 
 
 def scan_points_in_robot_frame(scan: Scan, mount: ArrayLike) -> np.ndarray:
@@ -222,7 +247,28 @@ def scan_points_in_robot_frame(scan: Scan, mount: ArrayLike) -> np.ndarray:
     >>> scan_points_in_robot_frame(scan, [0.2, 0.0, np.pi]).round(3)  # a rear laser
     array([[-0.8,  0. ]])
     """
-    return transform_points(mount, scan.points()[scan.valid_mask()])
+    ranges = scan.ranges
+    # Scan.valid_mask() without its errstate block (comparisons with nan do not warn).
+    valid = np.isfinite(ranges)
+    valid &= ranges >= scan.range_min
+    valid &= ranges <= scan.range_max
+    cosines, sines = _beam_directions(scan.angle_min, scan.angle_increment, ranges.size)
+    # Scan.points() of the valid beams: the same products, cos and sin looked up.
+    valid_ranges = ranges[valid]
+    points = np.empty((valid_ranges.size, 2))
+    np.multiply(valid_ranges, cosines[valid], out=points[:, 0])
+    np.multiply(valid_ranges, sines[valid], out=points[:, 1])
+    return transform_points(mount, points)
+
+
+@functools.lru_cache(maxsize=16)
+def _beam_directions(angle_min: float, increment: float, count: int) -> tuple[np.ndarray, ...]:
+    """Return cos and sin of ``Scan.angles()`` for a scan geometry (computed once, read-only)."""
+    angles = angle_min + increment * np.arange(count)
+    directions = np.cos(angles), np.sin(angles)
+    for array in directions:
+        array.flags.writeable = False
+    return directions
 
 
 @dataclass(frozen=True)

@@ -113,15 +113,20 @@ class ContactMonitor:
 
     def check(self) -> list[Contact]:
         """Return the robot's current contacts, one per other body, and record new collisions."""
+        ignored = (self.robot_body_id, self.world.floor_id)
+        # Nearly every step only the wheels and casters touch the floor: filter in one
+        # comprehension and return before any bookkeeping.
+        touching = [
+            point
+            for point in self._contact_points(bodyA=self.robot_body_id)
+            if point[_BODY_B] not in ignored and not point[_DISTANCE] > TOUCH_DISTANCE
+        ]
+        if not touching:
+            return []
         now = float(self.sim.sim_time)
         by_body: dict[int, list] = {}
-        for point in self._contact_points(bodyA=self.robot_body_id):
-            other = point[_BODY_B]
-            if other in (self.robot_body_id, self.world.floor_id):
-                continue
-            if point[_DISTANCE] > TOUCH_DISTANCE:
-                continue
-            by_body.setdefault(other, []).append(point)
+        for point in touching:
+            by_body.setdefault(point[_BODY_B], []).append(point)
         contacts = []
         for other, points in sorted(by_body.items()):
             last = self._last_seen.get(other)

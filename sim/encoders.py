@@ -37,6 +37,8 @@ array([0.975, 0.   , 0.   ])
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -55,8 +57,9 @@ def _sinc_and_derivative(a: float) -> tuple[float, float]:
     if abs(a) < _SMALL_HALF_TURN:
         a2 = a * a
         return 1.0 - a2 / 6.0 + a2 * a2 / 120.0, -a / 3.0 + a * a2 / 30.0
-    s, c = np.sin(a), np.cos(a)
-    return float(s / a), float((a * c - s) / (a * a))
+    # math's sin and cos are numpy's to the last bit (both call the C library).
+    s, c = math.sin(a), math.cos(a)
+    return s / a, (a * c - s) / (a * a)
 
 
 def arc_increment(left: float, right: float, track: float) -> np.ndarray:
@@ -84,12 +87,17 @@ def arc_increment(left: float, right: float, track: float) -> np.ndarray:
     >>> arc_increment(np.pi / 4, 3 * np.pi / 4, 1.0).round(6)  # quarter circle of radius 1
     array([1.      , 1.      , 1.570796])
     """
+    return np.array(_arc_increment(float(left), float(right), float(track)))
+
+
+def _arc_increment(left: float, right: float, track: float) -> tuple[float, float, float]:
+    """Return ``arc_increment`` as a tuple of floats (the encoders' per-tick path)."""
     distance = 0.5 * (left + right)
     dtheta = (right - left) / track
     half = 0.5 * dtheta
     sinc, _ = _sinc_and_derivative(half)
     chord = distance * sinc
-    return np.array([chord * np.cos(half), chord * np.sin(half), dtheta])
+    return chord * math.cos(half), chord * math.sin(half), dtheta
 
 
 def arc_increment_jacobian(left: float, right: float, track: float) -> np.ndarray:
@@ -102,19 +110,25 @@ def arc_increment_jacobian(left: float, right: float, track: float) -> np.ndarra
            [-1. ,  1. ],
            [-2. ,  2. ]])
     """
+    left, right, track = float(left), float(right), float(track)
     distance = 0.5 * (left + right)
     half = 0.5 * (right - left) / track
     sinc, dsinc = _sinc_and_derivative(half)
-    cos_h, sin_h = np.cos(half), np.sin(half)
+    cos_h, sin_h = math.cos(half), math.sin(half)
     # Derivatives wrt the mean distance d and the half angle a = dtheta / 2.
-    d_dx = np.array([sinc * cos_h, distance * (dsinc * cos_h - sinc * sin_h), 0.0])
-    d_dy = np.array([sinc * sin_h, distance * (dsinc * sin_h + sinc * cos_h), 0.0])
+    wrt_mean = (sinc * cos_h, sinc * sin_h, 0.0)
+    wrt_half = (  # dtheta = 2a
+        distance * (dsinc * cos_h - sinc * sin_h),
+        distance * (dsinc * sin_h + sinc * cos_h),
+        2.0,
+    )
     # Chain rule: d/dl = 1/2 d/dd - 1/(2b) d/da, d/dr = 1/2 d/dd + 1/(2b) d/da.
-    wrt_mean = np.array([d_dx[0], d_dy[0], 0.0])
-    wrt_half = np.array([d_dx[1], d_dy[1], 2.0])  # dtheta = 2a
     half_rate = 0.5 / track
-    return np.column_stack(
-        [0.5 * wrt_mean - half_rate * wrt_half, 0.5 * wrt_mean + half_rate * wrt_half]
+    return np.array(
+        [
+            [0.5 * mean - half_rate * turn, 0.5 * mean + half_rate * turn]
+            for mean, turn in zip(wrt_mean, wrt_half, strict=True)
+        ]
     )
 
 
@@ -158,7 +172,10 @@ class WheelEncoders:
         self.rng = rng
         self.noise_free = bool(noise_free)
         self._ticks_per_radian = spec.encoder_ticks_per_rev / (2.0 * np.pi)
-        self._ticks: np.ndarray | None = None
+        self._metres_per_tick = spec.metres_per_tick
+        self._quantisation_variance = self._metres_per_tick**2 / 6.0
+        # Counts as Python ints: the per-tick path does its arithmetic on floats and ints.
+        self._ticks: tuple[int, int] | None = None
         self.last_tick_deltas = np.zeros(2, dtype=np.int64)
 
     @property
@@ -175,12 +192,18 @@ class WheelEncoders:
         >>> WheelEncoders(PIONEER3DX, np.random.default_rng(0)).ticks([2 * np.pi, -1e-9])
         array([19150,    -1])
         """
+        return np.array(self._count(wheel_angles), dtype=np.int64)
+
+    def _count(self, wheel_angles: ArrayLike) -> tuple[int, int]:
+        """Return ``ticks`` as two Python ints (math.floor rounds exactly as numpy.floor)."""
         angles = np.asarray(wheel_angles, dtype=float).reshape(-1)
-        if angles.shape != (2,) or not np.isfinite(angles).all():
+        left, right = angles.tolist() if angles.shape == (2,) else (math.nan, math.nan)
+        if not (math.isfinite(left) and math.isfinite(right)):
             raise ValueError(
                 f"WheelEncoders: wheel_angles must be finite (left, right) in rad, got {angles}"
             )
-        return np.floor(angles * self._ticks_per_radian).astype(np.int64)
+        per_radian = self._ticks_per_radian
+        return math.floor(left * per_radian), math.floor(right * per_radian)
 
     def reset(self, wheel_angles: ArrayLike) -> None:
         """Start counting from the current wheel angles (call once before driving).
@@ -193,7 +216,7 @@ class WheelEncoders:
         >>> encoders.odometry_increment([12.0, -3.0])
         array([0., 0., 0.])
         """
-        self._ticks = self.ticks(wheel_angles)
+        self._ticks = self._count(wheel_angles)
         self.last_tick_deltas = np.zeros(2, dtype=np.int64)
 
     def wheel_travel(self, tick_deltas: ArrayLike) -> np.ndarray:
@@ -227,20 +250,24 @@ class WheelEncoders:
         >>> round(float(dtheta), 3), abs(round(float(dx), 6))
         (0.591, 0.0)
         """
-        ticks = self.ticks(wheel_angles)
+        ticks = self._count(wheel_angles)
         if self._ticks is None:
             raise RuntimeError(
                 "WheelEncoders: call reset(wheel_angles) before the first odometry_increment"
             )
-        deltas = ticks - self._ticks
+        left_ticks, right_ticks = ticks[0] - self._ticks[0], ticks[1] - self._ticks[1]
         self._ticks = ticks
-        self.last_tick_deltas = deltas
-        travel = self.wheel_travel(deltas)
+        self.last_tick_deltas = np.array([left_ticks, right_ticks], dtype=np.int64)
+        # Python floats, the same operations as wheel_travel and arc_increment on arrays.
+        left = left_ticks * self._metres_per_tick
+        right = right_ticks * self._metres_per_tick
         sigma = self.slip_sigma
         if sigma > 0.0:
             # Always draw two normals so the random stream does not depend on motion.
-            travel = travel + sigma * np.sqrt(np.abs(travel)) * self.rng.standard_normal(2)
-        return arc_increment(travel[0], travel[1], self.spec.wheel_separation)
+            left_noise, right_noise = self.rng.standard_normal(2).tolist()
+            left = left + sigma * math.sqrt(abs(left)) * left_noise
+            right = right + sigma * math.sqrt(abs(right)) * right_noise
+        return np.array(_arc_increment(left, right, self.spec.wheel_separation))
 
     def wheel_variances(self, tick_deltas: ArrayLike) -> np.ndarray:
         """Return the variances (m^2) of the measured ``(left, right)`` wheel travels.
@@ -274,7 +301,13 @@ class WheelEncoders:
         >>> float(np.sqrt(cov[0, 0])).__round__(6)  # ~ sigma * sqrt(1 m) / sqrt(2)
         0.000354
         """
-        travel = self.wheel_travel(tick_deltas)
-        jacobian = arc_increment_jacobian(travel[0], travel[1], self.spec.wheel_separation)
-        variances = self.wheel_variances(tick_deltas)
+        left_ticks, right_ticks = np.asarray(tick_deltas).tolist()
+        left = left_ticks * self._metres_per_tick
+        right = right_ticks * self._metres_per_tick
+        jacobian = arc_increment_jacobian(left, right, self.spec.wheel_separation)
+        # wheel_variances on floats: slip * |travel| + quantisation.
+        slip = self.slip_sigma**2
+        quantisation = self._quantisation_variance
+        variances = np.array([slip * abs(left) + quantisation, slip * abs(right) + quantisation])
+        # numpy's (BLAS) product, not a Python sum of products: they round differently.
         return (jacobian * variances) @ jacobian.T

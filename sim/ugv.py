@@ -25,6 +25,7 @@ array([1.4, 2.2, 0.5])
 
 from __future__ import annotations
 
+import math
 import tempfile
 
 import numpy as np
@@ -139,6 +140,15 @@ class SimUGV:
         dynamics = bullet.getDynamicsInfo(self.body_id, -1)
         self._com_in_base = np.asarray(dynamics[3], dtype=float)
         self._configure_dynamics()
+        # Bound once (BulletClient builds a new partial on every attribute access) with the
+        # constant arguments of the per-tick calls: these run at the control rate.
+        self._base_position_and_orientation = bullet.getBasePositionAndOrientation
+        self._joint_states = bullet.getJointStates
+        self._motor_control_array = bullet.setJointMotorControlArray
+        self._velocity_control = bullet.VELOCITY_CONTROL
+        self._wheel_joint_list = list(self.wheel_joints)
+        self._wheel_forces = [spec.max_wheel_torque, spec.max_wheel_torque]
+        self._half_track = 0.5 * spec.wheel_separation
         self._wheel_targets = np.zeros(2)
         self.set_wheel_speeds(0.0, 0.0)
 
@@ -195,19 +205,20 @@ class SimUGV:
         array([12.31, -1.  ])
         """
         limit = self.spec.max_wheel_speed
-        targets = np.clip(np.array([left, right], dtype=float), -limit, limit)
-        if not np.isfinite(targets).all():
+        # min/max on floats clip exactly like numpy.clip (an infinite speed becomes the
+        # limit, nan stays nan and is refused), at a fraction of the cost.
+        targets = [min(max(float(left), -limit), limit), min(max(float(right), -limit), limit)]
+        if not (math.isfinite(targets[0]) and math.isfinite(targets[1])):
             raise ValueError(f"SimUGV.set_wheel_speeds: speeds must be finite, got {left}, {right}")
-        self._wheel_targets = targets
-        torque = self.spec.max_wheel_torque
-        self._bullet.setJointMotorControlArray(
+        self._wheel_targets = np.array(targets)
+        self._motor_control_array(
             self.body_id,
-            list(self.wheel_joints),
-            self._bullet.VELOCITY_CONTROL,
-            targetVelocities=targets.tolist(),
-            forces=[torque, torque],
+            self._wheel_joint_list,
+            self._velocity_control,
+            targetVelocities=targets,
+            forces=self._wheel_forces,
         )
-        return targets.copy()
+        return np.array(targets)
 
     def command(self, v: float, omega: float) -> np.ndarray:
         """Drive with forward speed ``v`` (m/s) and yaw rate ``omega`` (rad/s).
@@ -226,14 +237,19 @@ class SimUGV:
         ...     round(float(right), 2), round(float(left / right), 4)
         (12.31, 0.7167)
         """
-        left, right = self.spec.wheel_speeds(v, omega)
-        speeds = np.array([left, right], dtype=float)
-        if not np.isfinite(speeds).all():
+        # UGVSpec.wheel_speeds on floats: the same IEEE operations without numpy's overhead.
+        v, omega = float(v), float(omega)
+        radius = self.spec.wheel_radius
+        left = (v - omega * self._half_track) / radius
+        right = (v + omega * self._half_track) / radius
+        if not (math.isfinite(left) and math.isfinite(right)):
             raise ValueError(f"SimUGV.command: v and omega must be finite, got {v}, {omega}")
-        peak = float(np.abs(speeds).max())
-        if peak > self.spec.max_wheel_speed:
-            speeds *= self.spec.max_wheel_speed / peak
-        return self.set_wheel_speeds(*speeds)
+        peak = max(abs(left), abs(right))
+        limit = self.spec.max_wheel_speed
+        if peak > limit:
+            factor = limit / peak
+            left, right = left * factor, right * factor
+        return self.set_wheel_speeds(left, right)
 
     def stop(self) -> None:
         """Command zero wheel speed (the motors brake with their torque limit).
@@ -253,9 +269,10 @@ class SimUGV:
 
     def _base_state(self) -> tuple[np.ndarray, np.ndarray]:
         """World position of ``base_link`` and the base rotation matrix."""
-        com, quaternion = self._bullet.getBasePositionAndOrientation(self.body_id)
+        com, quaternion = self._base_position_and_orientation(self.body_id)
         rotation = _rotation(quaternion)
-        return np.asarray(com, dtype=float) - rotation @ self._com_in_base, rotation
+        # numpy's (BLAS) matrix-vector product, not a Python sum: they round differently.
+        return np.array(com) - rotation @ self._com_in_base, rotation
 
     def true_pose(self) -> np.ndarray:
         """Return the ground-truth ``(x, y, theta)`` of ``base_link`` in the world.
@@ -269,8 +286,9 @@ class SimUGV:
         [3.0, -1.0, 3.141593]
         """
         position, rotation = self._base_state()
-        theta = np.arctan2(rotation[1, 0], rotation[0, 0])
-        return np.array([position[0], position[1], wrap_angle(theta)])
+        theta = float(np.arctan2(rotation[1, 0], rotation[0, 0]))  # numpy's atan2 (not math's)
+        x, y, _ = position.tolist()
+        return np.array([x, y, wrap_angle(theta)])
 
     def true_twist(self) -> np.ndarray:
         """Return the ground-truth twist ``(v_forward, v_left, omega)`` of ``base_link``.
@@ -318,8 +336,8 @@ class SimUGV:
         ...     robot.wheel_angles().round(1)  # about 2 rad/s for 1 s, less the start-up
         array([1.9, 1.9])
         """
-        states = self._bullet.getJointStates(self.body_id, list(self.wheel_joints))
-        return np.array([states[0][0], states[1][0]], dtype=float)
+        (left, *_), (right, *_) = self._joint_states(self.body_id, self._wheel_joint_list)
+        return np.array([left, right])
 
     def wheel_velocities(self) -> np.ndarray:
         """Return the wheel joint speeds ``(left, right)`` in rad/s.
@@ -358,8 +376,8 @@ class SimUGV:
         """
         position, rotation = self._base_state()
         world = position + rotation @ np.array([mount.x, mount.y, mount.z])
-        yaw = np.arctan2(rotation[1, 0], rotation[0, 0]) + mount.yaw
-        return np.array([world[0], world[1], world[2], wrap_angle(yaw)])
+        yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0])) + mount.yaw
+        return np.array([*world.tolist(), wrap_angle(yaw)])
 
     def reset(self, pose: ArrayLike) -> None:
         """Teleport ``base_link`` to ``pose`` = ``(x, y, theta)`` at rest, motors stopped.

@@ -32,17 +32,22 @@ class ArrayPathFollower(ChainedFormFollower):
     def __init__(self, knots, params: FollowerParams | None = None) -> None:
         super().__init__(ArrayCurvaturePath(knots), params)
 
-    def _project(self, pose: np.ndarray) -> float:
+    def _track(self, x: float, y: float) -> float:
         return float(
             self.path.project(
-                pose[None, :2], s_hint=self.progress, window=self.params.projection_window
+                np.array([[x, y]]), s_hint=self.progress, window=self.params.projection_window
             )[0]
         )
 
-    def _errors(self, pose: np.ndarray, s: float) -> tuple[float, float, float]:
-        reference = self.path.pose(np.array(s))
-        dx, dy = pose[0] - reference[0], pose[1] - reference[1]
-        c, s_theta = math.cos(pose[2]), math.sin(pose[2])
+    def _reference(self, s: float) -> tuple[float, float, float, float]:
+        x_ref, y_ref, theta_ref = self.path.pose(np.array(s))
+        return x_ref, y_ref, theta_ref, self.path.curvature(s)
+
+    @staticmethod
+    def _offset(x, y, theta, x_ref, y_ref, theta_ref) -> tuple[float, float, float]:
+        # numpy scalars (the reference's pose components) and numpy's wrap_angle.
+        dx, dy = x - x_ref, y - y_ref
+        c, s_theta = math.cos(theta), math.sin(theta)
         xe = c * dx + s_theta * dy
         ye = -s_theta * dx + c * dy
-        return xe, ye, float(wrap_angle(pose[2] - reference[2]))
+        return xe, ye, float(wrap_angle(np.asarray(theta - theta_ref)))

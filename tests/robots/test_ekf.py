@@ -14,6 +14,7 @@ from scipy.stats import chi2
 from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, range_bearing_model
 from semistatic.frames import between, compose, wrap_angle
+from tests.robots.ekf_reference import ReferenceEKF
 
 MOUNT = (0.25, 0.05, 0.1)
 RANGE_SIGMA = 0.012
@@ -366,3 +367,43 @@ def test_initialising_without_a_stamp_starts_the_outage_timer_at_the_first_updat
     assert not ekf.history[-1].reinitialized
     ekf.update(observe(truth, rng), stamp=106.0)  # a real 6 s gap: re-localise
     assert ekf.history[-1].reinitialized
+
+
+@pytest.mark.parametrize("bias_sigma", [0.0, 0.0173])
+def test_streamlined_filter_is_the_original_to_the_last_bit(bias_sigma):
+    # predict/update on floats and stacked arrays must not change a single bit of the
+    # state, the covariance or the history against the code they replaced.
+    params = EKFParams(mount=MOUNT, range_bias_sigma=bias_sigma)
+    fast, reference = EKFLocalizer(POSTS, params), ReferenceEKF(POSTS, params)
+    rng = np.random.default_rng(11)
+    truth = np.array([-8.0, -3.5, 0.0])
+    start_cov = np.diag([0.05**2, 0.05**2, 0.02**2])
+    for ekf in (fast, reference):
+        ekf.initialize(truth + np.array([0.03, -0.02, 0.01]), start_cov, 0.0)
+    for step, u_true in enumerate(true_increments(300)):
+        stamp = (step + 1) * DT
+        increment_cov = params.increment_covariance(u_true)
+        truth = compose(truth, u_true)
+        u = u_true + rng.multivariate_normal(np.zeros(3), increment_cov)
+        observations = observe(truth, rng)
+        # A far outlier now and then: the gate must refuse it in both.
+        if step % 17 == 0:
+            observations.append(LandmarkObservation(3.0, 0.5, np.diag([1e-4, 1e-6]), [0]))
+        pairs = fast.step(u, increment_cov, observations, stamp)
+        assert pairs == reference.step(u, increment_cov, observations, stamp)
+        assert np.array_equal(fast.state_covariance, reference.state_covariance)
+        assert np.array_equal(fast._filter.x, reference._filter.x)
+    assert len(fast.history) == len(reference.history) > 250
+    for ours, theirs in zip(fast.history, reference.history, strict=True):
+        for name in ("prior", "posterior", "correction", "sigma"):
+            assert np.array_equal(getattr(ours, name), getattr(theirs, name))
+        assert (ours.stamp, ours.landmarks, ours.nis, ours.reinitialized) == (
+            theirs.stamp,
+            theirs.landmarks,
+            theirs.nis,
+            theirs.reinitialized,
+        )
+        assert (ours.range_bias, ours.range_bias_sigma) == (
+            theirs.range_bias,
+            theirs.range_bias_sigma,
+        )

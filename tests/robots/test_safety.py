@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 from matplotlib.path import Path
 
 from robots.safety import (
@@ -16,6 +17,7 @@ from robots.safety import (
     field_occupancy,
     scan_points_in_robot_frame,
 )
+from semistatic.frames import transform_points
 from semistatic.types import Scan
 
 # An S300-like safety laser: 270 deg at 0.5 deg, 12.5 Hz, mounted 0.3 m ahead of the base.
@@ -301,3 +303,42 @@ def test_reset_and_time_order():
 def test_bad_policy_is_rejected(kwargs, match):
     with pytest.raises(ValueError, match=match):
         SafetyPolicy(**kwargs)
+
+
+def test_bounding_box_prefilter_counts_as_the_exact_predicate_alone():
+    # Points on the boxes' edges, on the polygons' vertices and edges, nan rows and points
+    # far away: the prefilter must keep every point the predicate counts.
+    rng = np.random.default_rng(12)
+    fields = FieldSet(
+        [(0.0, -1.0), (3.0, -1.2), (3.5, 0.0), (2.5, 1.0), (0.0, 0.8)],
+        [(0.2, -0.5), (1.5, -0.5), (1.5, 0.5), (0.2, 0.5)],
+    )
+    vertices = np.vstack([fields.warning, fields.protective])
+    edges = (vertices + np.roll(vertices, -1, axis=0)) / 2.0
+    box_edges = [[3.5, 0.3], [0.0, 0.0], [1.0, -1.2], [1.0, 1.0], [1.5, 0.0], [0.2, 0.5]]
+    points = np.vstack(
+        [vertices, edges, box_edges, [[np.nan, np.nan]], rng.uniform(-1.0, 4.5, (400, 2))]
+    )
+    state = field_occupancy(points, fields, 1)
+    valid = ~np.isnan(points[:, 0])
+    x, y = points[valid, 0], points[valid, 1]
+    expected = (
+        int(np.count_nonzero(shapely.intersects_xy(fields.warning_polygon, x, y))),
+        int(np.count_nonzero(shapely.intersects_xy(fields.protective_polygon, x, y))),
+    )
+    assert (state.warning_count, state.protective_count) == expected
+    assert state.protective_count > 10
+
+
+def test_scan_points_are_the_scan_end_points_to_the_last_bit():
+    # Cached beam directions must give exactly Scan.points() of the valid beams.
+    rng = np.random.default_rng(13)
+    for count in (5, 541):
+        ranges = rng.uniform(0.0, 12.0, count)
+        ranges[rng.random(count) < 0.2] = np.inf
+        ranges[rng.random(count) < 0.05] = np.nan
+        scan = Scan(
+            ranges=ranges, angle_min=-2.3, angle_increment=0.0087, range_min=0.1, range_max=10.0
+        )
+        expected = transform_points(MOUNT, scan.points()[scan.valid_mask()])
+        np.testing.assert_array_equal(scan_points_in_robot_frame(scan, MOUNT), expected)

@@ -10,6 +10,7 @@ from semistatic.frames import compose
 from sim.client import SimClient
 from sim.encoders import WheelEncoders, arc_increment, arc_increment_jacobian
 from sim.ugv import SimUGV, add_floor
+from tests.sim.encoders_reference import ReferenceEncoders, reference_arc_increment_jacobian
 
 ALL_PRESETS = sorted(PRESETS.values(), key=lambda spec: spec.name)
 
@@ -249,3 +250,30 @@ def test_noise_free_odometry_tracks_the_physics_closely():
     """Without slip noise the only error is the physics' own (no tyre slip here)."""
     distance, error = _odometry_drift(PIONEER3DX, 0, noise_free=True)
     assert error / distance < 0.001
+
+
+@pytest.mark.parametrize("spec", ALL_PRESETS, ids=lambda spec: spec.name)
+def test_float_fast_path_is_the_array_code_to_the_last_bit(spec):
+    # Odometry on Python floats must not change a single bit of an increment or of its
+    # covariance against the array code it replaced, slip noise included.
+    spec = spec.replace(encoder_slip_sigma=0.02)
+    fast = WheelEncoders(spec, np.random.default_rng(5))
+    reference = ReferenceEncoders(spec, np.random.default_rng(5))
+    rng = np.random.default_rng(6)
+    angles = np.array([3.0, -1.5])
+    fast.reset(angles)
+    reference.reset(angles)
+    for tick in range(400):
+        # Straight, turning, on the spot, standing still and backwards.
+        left, right = [(0.2, 0.2), (0.1, 0.3), (-0.2, 0.2), (0.0, 0.0), (-0.1, -0.12)][tick % 5]
+        angles = angles + np.array([left, right]) + rng.normal(0.0, 0.01, 2)
+        increment = fast.odometry_increment(angles)
+        np.testing.assert_array_equal(increment, reference.odometry_increment(angles))
+        np.testing.assert_array_equal(fast.last_tick_deltas, reference.last_tick_deltas)
+        covariance = fast.increment_covariance(fast.last_tick_deltas)
+        expected = reference.increment_covariance(reference.last_tick_deltas)
+        np.testing.assert_array_equal(covariance, expected)
+        np.testing.assert_array_equal(
+            arc_increment_jacobian(*increment[:2], spec.wheel_separation),
+            reference_arc_increment_jacobian(*increment[:2], spec.wheel_separation),
+        )

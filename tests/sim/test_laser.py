@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from robots.lasers import LMS100, POST_INTENSITY_THRESHOLD, S300, LaserSpec
+from robots.path import SplinePath
 from sim.client import SimClient
 from sim.ground_truth import obstacle_footprints, reference_ranges
 from sim.laser import RaycastLaser
 from sim.world_builder import TAG_POST, SimWorld
+from tests.sim.laser_reference import ReferenceLaser
 from tests.sim.random_scenes import free_pose, random_world, room_walls, simple_path
 from worlds import bundled_worlds, load_world
 from worlds.spec import PostSpec, WallSpec, WorldSpec
@@ -243,3 +245,27 @@ def test_posts_of_the_default_spec_are_far_above_the_threshold():
     post = PostSpec(0.0, 0.0)
     assert post.remission - POST_INTENSITY_THRESHOLD > 5 * spec.intensity_sigma
     assert POST_INTENSITY_THRESHOLD - WallSpec((0, 0), (1, 0)).remission > 5 * spec.intensity_sigma
+
+
+@pytest.mark.parametrize("laser_spec", [LMS100, S300], ids=["lms100", "s300"])
+def test_lean_scan_is_the_original_code_to_the_last_bit(sim, laser_spec):
+    # In-place arithmetic and maximum/minimum instead of clip must not change a single bit
+    # of a noisy scan (dropouts and clipping at range_max included) from the same stream.
+    spec = dataclasses.replace(laser_spec, dropout_prob=0.05, range_max=2.5, range_sigma=0.05)
+    world = SimWorld(sim, load_world("pal1"))
+    fast = RaycastLaser(sim, spec, world, np.random.default_rng(3))
+    reference = ReferenceLaser(sim, spec, world, np.random.default_rng(3))
+    path = SplinePath(world.spec.path.knots)
+    dropped = clipped = 0
+    for s in np.linspace(0.0, path.length, 10):
+        x, y, heading = path.pose(float(s))
+        pose = (x, y, SENSOR_HEIGHT, heading + 0.3)
+        ours, theirs = fast.scan(pose, stamp=1.0), reference.scan(pose, stamp=1.0)
+        np.testing.assert_array_equal(ours.ranges, theirs.ranges)
+        np.testing.assert_array_equal(ours.intensities, theirs.intensities)
+        np.testing.assert_array_equal(ours.pose, theirs.pose)
+        dropped += np.count_nonzero(np.isinf(ours.ranges))
+        clipped += np.count_nonzero(ours.ranges == spec.range_max)
+    # Both branches of the noise model were exercised.
+    assert dropped > 0
+    assert clipped > 0

@@ -279,3 +279,16 @@ def test_two_live_clients_stepped_alternately_stay_identical():
                 sim_b.step(SAMPLE_STEPS)
                 assert np.array_equal(robot_a.true_pose(), robot_b.true_pose())
         assert np.array_equal(robot_a.wheel_angles(), robot_b.wheel_angles())
+
+
+def test_infinite_wheel_speeds_clip_to_the_limit_and_nan_is_refused():
+    # The float clip must keep numpy.clip's semantics: +-inf is a request for full speed.
+    with SimClient() as sim:
+        robot = SimUGV(sim, PIONEER3DX)
+        limit = PIONEER3DX.max_wheel_speed
+        np.testing.assert_array_equal(robot.set_wheel_speeds(np.inf, -np.inf), [limit, -limit])
+        with pytest.raises(ValueError, match="speeds must be finite"):
+            robot.set_wheel_speeds(np.nan, 0.0)
+        with pytest.raises(ValueError, match="v and omega must be finite"):
+            robot.command(np.inf, 0.0)
+        np.testing.assert_array_equal(robot.wheel_targets, [limit, -limit])
