@@ -16,6 +16,7 @@ Examples
 [2]
 """
 
+from semistatic.alignment import Alignment, AlignmentParams, align_points
 from semistatic.association import associate
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
@@ -28,6 +29,8 @@ from semistatic.similarity import similarity, tangent_function
 from semistatic.types import Scan
 
 __all__ = [
+    "Alignment",
+    "AlignmentParams",
     "LocalMap",
     "MapPolyline",
     "MapperParams",
@@ -35,6 +38,7 @@ __all__ = [
     "PolylineMap",
     "Scan",
     "UpdateReport",
+    "align_points",
     "as_polyline",
     "associate",
     "douglas_peucker",

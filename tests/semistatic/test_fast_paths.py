@@ -23,16 +23,10 @@ from semistatic.association import FAR_COST, _optimal_path
 from semistatic.extraction import _douglas_peucker_rows
 from semistatic.frames import untransform_points
 from semistatic.local_map import LocalMap
-from semistatic.mapper import (
-    MapPolyline,
-    PolylineMap,
-    _replaced,
-    expected_ranges,
-    extend_ends,
-    visible_beams,
-)
+from semistatic.mapper import MapPolyline, PolylineMap, _replaced
 from semistatic.polyline import EMPTY_BOX, Polyline
 from semistatic.types import Scan
+from semistatic.visibility import expected_ranges, extend_ends, visible_beams
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 

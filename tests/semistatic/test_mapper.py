@@ -9,17 +9,16 @@ import pytest
 
 from semistatic.extraction import extract_polylines
 from semistatic.hausdorff import hausdorff
-from semistatic.mapper import (
-    MapPolyline,
-    PolylineMap,
+from semistatic.mapper import MapPolyline, PolylineMap
+from semistatic.params import MapperParams
+from semistatic.types import Scan
+from semistatic.visibility import (
     expected_ranges,
     extend_ends,
     is_missing,
     should_be_visible,
     visible_beams,
 )
-from semistatic.params import MapperParams
-from semistatic.types import Scan
 from tests.semistatic.conftest import NASTY_SCANS
 from tests.semistatic.synthetic import box, cast_scan, raycast, scene, wall
 
