@@ -13,7 +13,8 @@ from matplotlib.figure import Figure
 from matplotlib.image import imread
 
 from robots.path import SplinePath
-from scenarios import figures
+from scenarios.figures import ekf as ekf_figure
+from scenarios.figures import laps as lap_figures
 from scenarios.figures import (
     plot_detection_scores,
     plot_ekf_corrections,
@@ -316,14 +317,16 @@ def test_map_without_optional_layers_is_still_drawn(world, tmp_path):
 
 def test_lap_summary_states_totals_savings_and_stops():
     times = {policy: np.asarray(values) for policy, values in LAPS.items()}
-    summary = figures._lap_summary(times, {"adaptive": np.array([0, 2, 0])})
+    summary = lap_figures._lap_summary(times, {"adaptive": np.array([0, 2, 0])})
     assert summary == (
         "total: conservative 121.5 s, adaptive 103.5 s; adaptive saves 14.8%\n"
         "protective stops: adaptive 2"
     )
-    slower = figures._lap_summary({"conservative": np.array([10.0]), "fast": np.array([11.0])}, {})
+    slower = lap_figures._lap_summary(
+        {"conservative": np.array([10.0]), "fast": np.array([11.0])}, {}
+    )
     assert slower == "total: conservative 10.0 s, fast 11.0 s; fast loses 10.0%"
-    assert "saves" not in figures._lap_summary({"a": np.array([1.0]), "b": np.array([2.0])}, {})
+    assert "saves" not in lap_figures._lap_summary({"a": np.array([1.0]), "b": np.array([2.0])}, {})
 
 
 def test_lap_times_accepts_more_policies_than_colours(tmp_path):
@@ -349,7 +352,7 @@ def test_tangent_histograms_accept_polyline_objects(tmp_path):
 
 def test_ekf_axis_covers_every_ordinary_correction():
     _, corrections, sigmas = ekf_inputs()
-    limit, outside = figures._correction_axis_limit(corrections[:, 0], sigmas[:, 0])
+    limit, outside = ekf_figure._correction_axis_limit(corrections[:, 0], sigmas[:, 0])
     assert not outside.any()
     assert limit >= np.abs(corrections[:, 0]).max()
 
@@ -358,7 +361,7 @@ def test_ekf_axis_flags_a_reinitialisation_jump_instead_of_stretching():
     _, corrections, sigmas = ekf_inputs()
     jumped = corrections[:, 0].copy()
     jumped[40] = 0.5  # a 50 cm jump where corrections are a few mm
-    limit, outside = figures._correction_axis_limit(jumped, sigmas[:, 0])
+    limit, outside = ekf_figure._correction_axis_limit(jumped, sigmas[:, 0])
     assert np.flatnonzero(outside).tolist() == [40]
     assert limit < 0.1
 
