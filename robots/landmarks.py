@@ -27,7 +27,6 @@ Examples
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -38,7 +37,7 @@ from numpy.typing import ArrayLike
 
 from robots.lasers import POST_INTENSITY_THRESHOLD
 from semistatic.frames import wrap_angle
-from semistatic.types import Scan
+from semistatic.types import Scan, beam_angles
 
 __all__ = [
     "CHI2_2DOF_99",
@@ -240,7 +239,7 @@ def detect_landmarks(
             f"got {range_sigma}, {bearing_sigma}"
         )
     ranges = scan.ranges
-    angles = _beam_angles(scan.angle_min, scan.angle_increment, ranges.size)
+    angles = beam_angles(ranges.size, scan.angle_min, scan.angle_increment)
     # Scan.valid_mask() without its errstate block (comparisons with nan do not warn).
     valid = np.isfinite(ranges)
     valid &= ranges >= scan.range_min
@@ -271,14 +270,6 @@ def detect_landmarks(
     if not groups:
         return []
     return _posts_from_groups(groups, ranges, angles, post_radius, range_sigma, bearing_sigma)
-
-
-@functools.lru_cache(maxsize=16)
-def _beam_angles(angle_min: float, increment: float, count: int) -> np.ndarray:
-    """Return ``Scan.angles()`` for a scan geometry, computed once per geometry (read-only)."""
-    angles = angle_min + increment * np.arange(count)
-    angles.flags.writeable = False
-    return angles
 
 
 class _Group(NamedTuple):

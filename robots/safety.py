@@ -34,7 +34,6 @@ SafetyOutput(speed_scale=0.0, zone='protective')
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -44,7 +43,7 @@ import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
-from semistatic.types import Scan
+from semistatic.types import Scan, beam_directions
 
 __all__ = [
     "ZONES",
@@ -252,23 +251,13 @@ def scan_points_in_robot_frame(scan: Scan, mount: ArrayLike) -> np.ndarray:
     valid = np.isfinite(ranges)
     valid &= ranges >= scan.range_min
     valid &= ranges <= scan.range_max
-    cosines, sines = _beam_directions(scan.angle_min, scan.angle_increment, ranges.size)
+    cosines, sines = beam_directions(ranges.size, scan.angle_min, scan.angle_increment)
     # Scan.points() of the valid beams: the same products, cos and sin looked up.
     valid_ranges = ranges[valid]
     points = np.empty((valid_ranges.size, 2))
     np.multiply(valid_ranges, cosines[valid], out=points[:, 0])
     np.multiply(valid_ranges, sines[valid], out=points[:, 1])
     return transform_points(mount, points)
-
-
-@functools.lru_cache(maxsize=16)
-def _beam_directions(angle_min: float, increment: float, count: int) -> tuple[np.ndarray, ...]:
-    """Return cos and sin of ``Scan.angles()`` for a scan geometry (computed once, read-only)."""
-    angles = angle_min + increment * np.arange(count)
-    directions = np.cos(angles), np.sin(angles)
-    for array in directions:
-        array.flags.writeable = False
-    return directions
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline
-from semistatic.types import Scan
+from semistatic.types import Scan, beam_directions
 
 __all__ = [
     "MAX_BRIDGED_GAP",
@@ -170,17 +170,6 @@ def _frozen(array: np.ndarray) -> np.ndarray:
     return array
 
 
-@functools.lru_cache(maxsize=16)
-def _beam_directions(count: int, angle_min: float, angle_increment: float):
-    """Return the cosines and sines of the ``count`` beam angles of a scan geometry.
-
-    Scans of one scanner share them; ``angle_min + angle_increment * i`` is the angle of
-    :meth:`Scan.angles`, so the values are bitwise those of computing them every scan.
-    """
-    angles = angle_min + angle_increment * np.arange(count)
-    return _frozen(np.cos(angles)), _frozen(np.sin(angles))
-
-
 def split_breakpoints(
     scan: Scan, valid: ArrayLike, lam: float, sigma_r: float, min_points: int
 ) -> list[np.ndarray]:
@@ -250,7 +239,7 @@ def split_breakpoints(
 def _end_points(scan: Scan, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return the sensor-frame x and y of the beams ``index``."""
     ranges = scan.ranges[index]
-    cos, sin = _beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
     return ranges * cos[index], ranges * sin[index]
 
 

@@ -18,6 +18,7 @@ array([[ 0.878, -0.479],
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,7 +26,45 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["Scan"]
+__all__ = ["Scan", "beam_angles", "beam_directions"]
+
+
+@functools.lru_cache(maxsize=32)
+def beam_angles(count: int, angle_min: float, angle_increment: float) -> np.ndarray:
+    """Return the ``count`` beam angles ``angle_min + i * angle_increment`` (rad, read-only).
+
+    Computed once per scan geometry and shared, so hot loops over the scans of one scanner
+    do not redo it; the values are bitwise those of :meth:`Scan.angles`.
+
+    Examples
+    --------
+    >>> beam_angles(3, -0.5, 0.5)
+    array([-0.5,  0. ,  0.5])
+    >>> beam_angles(3, -0.5, 0.5) is beam_angles(3, -0.5, 0.5)
+    True
+    """
+    angles = angle_min + angle_increment * np.arange(count)
+    angles.flags.writeable = False
+    return angles
+
+
+@functools.lru_cache(maxsize=32)
+def beam_directions(
+    count: int, angle_min: float, angle_increment: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the cosines and sines of :func:`beam_angles` (read-only, cached likewise).
+
+    Examples
+    --------
+    >>> cos, sin = beam_directions(2, 0.0, np.pi / 2)
+    >>> cos.round(12), sin.round(12)
+    (array([1., 0.]), array([0., 1.]))
+    """
+    angles = beam_angles(count, angle_min, angle_increment)
+    directions = np.cos(angles), np.sin(angles)
+    for array in directions:
+        array.flags.writeable = False
+    return directions
 
 
 @dataclass(frozen=True, eq=False)

@@ -28,11 +28,10 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.extraction import _beam_directions
 from semistatic.frames import untransform_points
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline, as_polyline
-from semistatic.types import Scan
+from semistatic.types import Scan, beam_directions
 
 __all__ = [
     "MAX_END_EXTENSION",
@@ -280,7 +279,7 @@ def visible_beams(
     else:
         # Only the beams of the polyline's sector can hit it: the others expect inf.
         first, stop = _beams_in_sector(points, scan)
-        cos, sin = _beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+        cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
         expected = _edge_hits(points, cos[first:stop], sin[first:stop])
         ranges = scan.ranges[first:stop]
     limit = min(scan.range_max, max_range)
