@@ -399,15 +399,19 @@ def align_points(
     reference = _Reference.of(starts, ends).candidates(transform_points(initial, points), margin)
     if len(reference.start) == 0:
         return rejected("too few points")
+    def weighted_matches(at: np.ndarray):
+        """Return the points matched at pose ``at``: mask, residuals, normals, points, weights."""
+        world = transform_points(at, points)
+        matched, residual, normal, _ = reference.matches(world, params.max_distance)
+        residual, normal, world = residual[matched], normal[matched], world[matched]
+        return matched, residual, normal, world, 1.0 / (1.0 + (residual / params.noise) ** 2)
+
     current = initial.copy()
     for _ in range(params.iterations):
-        world = transform_points(current, points)
-        matched, residual, normal, _ = reference.matches(world, params.max_distance)
+        matched, residual, normal, world, weights = weighted_matches(current)
         count = int(np.count_nonzero(matched))
         if count < params.min_points:
             return rejected("too few points", current, matched=count)
-        residual, normal, world = residual[matched], normal[matched], world[matched]
-        weights = 1.0 / (1.0 + (residual / params.noise) ** 2)
         jacobian = _jacobian(world, normal, current[:2])
         weighted = jacobian * weights[:, None]
         try:
@@ -421,13 +425,10 @@ def align_points(
         if math.hypot(step[0], step[1]) < CONVERGED_STEP and abs(step[2]) < CONVERGED_STEP:
             break
 
-    world = transform_points(current, points)
-    matched, residual, normal, _ = reference.matches(world, params.max_distance)
+    matched, residual, normal, world, weights = weighted_matches(current)
     count = int(np.count_nonzero(matched))
     if count < params.min_points:
         return rejected("too few points", current, matched=count)
-    residual, normal, world = residual[matched], normal[matched], world[matched]
-    weights = 1.0 / (1.0 + (residual / params.noise) ** 2)
     constraint = _constraint(_jacobian(world, normal, current[:2]), world, current[:2], weights)
     # The same points at the initial pose: did the correction explain them better?
     _, _, _, distance_before = reference.matches(

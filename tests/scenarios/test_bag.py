@@ -21,17 +21,12 @@ from scenarios.runner import run_scenario
 from semistatic.frames import compose, inverse
 from semistatic.local_map import LocalMap
 from semistatic.logs.rosbag import EKF_TOPIC, MARKER_TOPIC, read_bag
+from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
 
 POSE_TOLERANCE = 1e-9  # yaw travels as a quaternion: a few ulp of round trip
 STAMP_TOLERANCE = 1e-9  # stamps travel as integer nanoseconds
 ODOMETRY_DRIFT_BOUND = 0.03  # m: wheel odometry over the tiny 3.5 m path stays this close
-
-
-def run_cli(capsys, *args):
-    status = main([str(arg) for arg in args])
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
 
 
 def without_performance(metrics):
@@ -213,14 +208,6 @@ def test_failed_write_leaves_no_bag_and_no_staging(recorded, tmp_path):
 
 def test_cli_storage_choices_match_the_writer():
     assert BAG_STORAGE_CHOICES == BAG_STORAGES
-
-
-def assert_one_error_line(err, *fragments):
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("error: ")
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
 
 
 @pytest.mark.parametrize(

@@ -6,22 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.cli import main
+from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
-
-
-def run_cli(capsys, *args):
-    status = main([str(arg) for arg in args])
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
-
-
-def assert_one_error_line(err, *fragments):
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("error: ")
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
 
 
 @pytest.mark.parametrize(

@@ -26,25 +26,12 @@ from scenarios.tune import (
     sweep_row,
     write_sweep,
 )
+from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
 from worlds.errors import SpecError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GATES = (0.08, 0.16)
-
-
-def run_cli(capsys, *args):
-    status = main([str(arg) for arg in args])
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
-
-
-def assert_one_error_line(err, *fragments):
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("error: ")
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
 
 
 def without_timing(row):
