@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 from semistatic.params import MapperParams
 from worlds.errors import MEMORY, SpecError
-from worlds.validation import bounds
+from worlds.spec import BOX_SIZE, COORDINATE
+from worlds.validation import bounds, check_fields, safe_name
 
 __all__ = [
     "BOX_ACTIONS",
@@ -24,6 +25,15 @@ __all__ = [
     "SafetySettings",
     "ScenarioSpec",
 ]
+
+MAX_LAPS = 1000
+"""Laps of one run: 1000 laps of a 10 m path are about 10 km, a few days of driving."""
+
+MAX_SEED = 2**63 - 1
+"""Largest seed (a 64-bit signed integer, what every tool around us can store)."""
+
+MAX_LAP_TIMEOUT = 3600.0
+"""Longest lap timeout (s): a lap of a bundled path takes 25-60 s."""
 
 POLICIES = ("conservative", "adaptive")
 BOX_ACTIONS = ("move", "add", "remove")
@@ -44,6 +54,7 @@ class Rates:
     safety_hz: float = field(default=12.5, metadata=bounds(gt=0.0, le=100.0))
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("control_hz", "localization_hz", "safety_hz"):
             if getattr(self, name) > self.physics_hz:
                 raise SpecError(
@@ -57,6 +68,9 @@ class Noise:
 
     odometry: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
     range: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -78,6 +92,9 @@ class SafetySettings:
     adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
     min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
 
+    def __post_init__(self) -> None:
+        check_fields(self)
+
 
 @dataclass(frozen=True)
 class BoxMove:
@@ -87,13 +104,14 @@ class BoxMove:
     ``remove``. Moves happen while the robot is back at the start, i.e. not observing.
     """
 
-    lap: int = field(metadata=bounds(ge=2))
+    lap: int = field(metadata=bounds(ge=2, le=MAX_LAPS))
     action: str
-    box: str
-    pose: tuple[float, float, float] | None = None
-    size: tuple[float, float, float] | None = field(default=None, metadata=bounds(gt=0.0))
+    box: str = field(metadata=safe_name())
+    pose: tuple[float, float, float] | None = field(default=None, metadata=COORDINATE)
+    size: tuple[float, float, float] | None = field(default=None, metadata=BOX_SIZE)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.action not in BOX_ACTIONS:
             raise SpecError(MEMORY, "action", f"must be one of {', '.join(BOX_ACTIONS)}")
         if self.action in ("move", "add") and self.pose is None:
@@ -106,15 +124,15 @@ class BoxMove:
 class ScenarioSpec:
     """One experiment. ``world`` is a bundled world name or a path (relative to the file)."""
 
-    name: str
+    name: str = field(metadata=safe_name())
     world: str
     robot: str = "pioneer3dx"
-    laps: int = field(default=5, metadata=bounds(ge=1, le=1000))
-    seed: int = field(default=0, metadata=bounds(ge=0))
+    laps: int = field(default=5, metadata=bounds(ge=1, le=MAX_LAPS))
+    seed: int = field(default=0, metadata=bounds(ge=0, le=MAX_SEED))
     policy: str = "conservative"
     description: str = ""
     people: tuple[str, ...] = ()
-    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0))
+    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0, le=MAX_LAP_TIMEOUT))
     rates: Rates = field(default_factory=Rates)
     noise: Noise = field(default_factory=Noise)
     safety: SafetySettings = field(default_factory=SafetySettings)
@@ -123,6 +141,7 @@ class ScenarioSpec:
     source: str = MEMORY
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.policy not in POLICIES:
             raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")
         for index, move in enumerate(self.moves):

@@ -22,7 +22,7 @@ from scenarios.load import (
     parse_override,
     scenario_from_toml,
 )
-from scenarios.spec import BoxMove
+from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems
 from worlds.errors import SpecError
 from worlds.load import DATA_DIR as WORLD_DATA_DIR
@@ -192,7 +192,7 @@ def test_later_overrides_win():
     [
         ("laps=-1", "laps", "must be >= 1 and <= 1000, got -1"),
         ("laps=2.5", "laps", "expected an integer, got a float 2.5"),
-        ("seed=-3", "seed", "must be >= 0, got -3"),
+        ("seed=-3", "seed", "must be >= 0 and <= 9223372036854775807, got -3"),
         ("policy=fast", "policy", "must be one of conservative, adaptive"),
         ("mapper.gate=-0.1", "mapper.gate", "must be > 0"),
         ("safety.slowdown=1.5", "safety.slowdown", "must be > 0.0 and <= 1.0, got 1.5"),
@@ -279,7 +279,7 @@ def test_not_toml_names_the_line(tmp_path):
         ('world = "sim1"\nlaps = -2\n', "laps", "must be >= 1 and <= 1000, got -2"),
         ('world = "sim1"\nlaps = 0\n', "laps", "must be >= 1"),
         (GOOD + 'policy = "fast"\n', "policy", "must be one of conservative, adaptive"),
-        (GOOD + "seed = -1\n", "seed", "must be >= 0, got -1"),
+        (GOOD + "seed = -1\n", "seed", "must be >= 0 and <= 9223372036854775807, got -1"),
         ("laps = 5\n", "world", "missing required key"),
         ('world = "sim11"\n', "world", "not a bundled world (did you mean 'sim1'?)"),
         (GOOD + 'robot = "pioner"\n', "robot", "(did you mean 'pioneer3dx'?)"),
@@ -486,12 +486,40 @@ def test_world_for_lap_counts_laps_from_1(lap):
         world_for_lap(load_world("sim1"), [], lap)
 
 
-def test_bad_box_size_in_a_move_names_the_move():
-    move = BoxMove(
-        lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0), size=(0.6, -0.5, 0.6)
-    )
-    with pytest.raises(SpecError, match=r"^f\.toml: moves\[0\]\.size: every value must be > 0"):
-        world_for_lap(load_world("sim1"), [move], 2, file="f.toml")
+@pytest.mark.parametrize(
+    ("build", "text", "key"),
+    [
+        (lambda: ScenarioSpec(name="s", world="sim1", laps=0), "laps = 0", "laps"),
+        (lambda: ScenarioSpec(name="s", world="sim1", seed=-1), "seed = -1", "seed"),
+        (lambda: ScenarioSpec(name="s", world="sim1", lap_timeout=1e9), "lap_timeout = 1e9",
+         "lap_timeout"),
+        (lambda: ScenarioSpec(name="../up", world="sim1"), 'name = "../up"', "name"),
+        (lambda: Rates(safety_hz=float("nan")), "[rates]\nsafety_hz = nan", "rates.safety_hz"),
+        (lambda: Noise(range=-1.0), "[noise]\nrange = -1.0", "noise.range"),
+        (lambda: SafetySettings(min_points=2.5), "[safety]\nmin_points = 2.5",
+         "safety.min_points"),
+        (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0),
+                         size=(0.6, -0.5, 0.6)),
+         '[[moves]]\nlap = 2\naction = "move"\nbox = "carton_aisle"\npose = [3.5, -0.66, 0.0]'
+         "\nsize = [0.6, -0.5, 0.6]", "moves[0].size"),
+        (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, 1e7, 0.0)),
+         '[[moves]]\nlap = 2\naction = "move"\nbox = "carton_aisle"\npose = [3.5, 1e7, 0.0]',
+         "moves[0].pose"),
+    ],
+)
+def test_spec_built_in_code_fails_as_the_file_would(tmp_path, build, text, key):
+    with pytest.raises(SpecError) as in_code:
+        build()
+    path = tmp_path / "scenario.toml"
+    top, _, tables = text.partition("[")
+    path.write_text(f'world = "sim1"\n{top}\n' + (f"[{tables}\n" if tables else ""))
+    with pytest.raises(SpecError) as from_file:
+        load_scenario(path)
+    assert in_code.value.file == "<memory>"
+    assert from_file.value.file == str(path)
+    assert from_file.value.key == key
+    assert key.endswith(in_code.value.key)
+    assert in_code.value.message == from_file.value.message
 
 
 def test_check_moves_blames_the_move_that_broke_the_layout():
