@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -422,7 +423,7 @@ def test_valid_moves_in_a_user_file_load(tmp_path):
     assert boxes == {"carton_aisle": (3.8, -0.66, 0.0), "pallet_turn": (6.5, -0.5, 0.35)}
 
 
-# --- a world's own flaws are not blamed on the scenario -----------------------------------
+# --- lap 1 is checked as it stands -------------------------------------------------------
 
 
 @pytest.fixture
@@ -435,23 +436,56 @@ def flawed_world(tmp_path: Path) -> Path:
     return path
 
 
-def test_world_flaws_not_caused_by_the_moves_do_not_stop_loading(tmp_path, flawed_world):
+def test_a_flawed_world_is_rejected_at_lap_1_in_its_own_file(tmp_path, flawed_world):
     assert layout_problems(load_world(flawed_world))
     text = 'world = "flawed.toml"\n' + MOVE_OF_AISLE.format(lap=2, box="carton_aisle", x=3.5)
-    spec = load_scenario(write(tmp_path, text))
-    assert spec.world == str(flawed_world)
+    error = error_of(write(tmp_path, text))
+    names = [box.name for box in load_world(flawed_world).boxes]
+    assert (error.file, error.key) == (str(flawed_world), f"boxes[{names.index('carton_north')}]")
+    assert error.message.startswith("lap 1: box 'carton_north': the swept robot footprint")
 
 
-def test_moving_a_flawed_box_to_another_bad_place_is_an_error(tmp_path, flawed_world):
-    text = (
-        'world = "flawed.toml"\n[[moves]]\nlap = 3\naction = "move"\nbox = "carton_north"\n'
-        "pose = [7.8, 3.8, 0.0]\n"
-    )
-    path = write(tmp_path, text)
-    error = error_of(path)
-    assert (error.file, error.key) == (str(path), "moves[0]")
-    assert error.message.startswith("before lap 3: path: ")
-    assert "hidden by box 'carton_north'" in error.message
+def _moved(old: str, new: str):
+    """Return an edit of sim1's text that replaces ``old`` (which must be there) by ``new``."""
+
+    def edit(text: str) -> str:
+        assert old in text
+        return text.replace(old, new, 1)
+
+    return edit
+
+
+def _posts_kept(count: int):
+    """Return an edit of sim1's text that keeps only its first ``count`` posts."""
+
+    def edit(text: str) -> str:
+        block = re.search(r"^posts = \[\n(.*?)^\]", text, flags=re.S | re.M)
+        posts = re.findall(r"\{[^}]*\}", block[1])
+        return text.replace(block[0], "posts = [" + ", ".join(posts[:count]) + "]")
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("edit", "key", "fragment"),
+    [
+        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [3.0, -1.45, 0.0]"),
+                     "boxes[0]", "box 'carton_aisle': overlaps walls[0]", id="box-in-wall"),
+        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [1.0, 0.0, 0.0]"),
+                     "boxes[0]", "box 'carton_aisle': the swept robot footprint overlaps it",
+                     id="box-on-start"),
+        pytest.param(_posts_kept(2), "posts", "see fewer than 3 posts", id="two-posts"),
+        pytest.param(_posts_kept(0), "posts", "see fewer than 3 posts, the worst 0", id="no-posts"),
+    ],
+)
+def test_lap_1_problems_are_errors_of_the_world_file(tmp_path, edit, key, fragment):
+    text = (WORLD_DATA_DIR / "sim1.toml").read_text()
+    world_file = tmp_path / "edited.toml"
+    world_file.write_text(edit(text))
+    error = error_of(write(tmp_path, 'world = "edited.toml"\n'))
+    assert (error.file, error.key) == (str(world_file), key)
+    assert error.message.startswith("lap 1: ")
+    assert fragment in error.message
 
 
 def test_relative_world_path_resolves_next_to_the_scenario(tmp_path, flawed_world):
