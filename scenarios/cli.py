@@ -372,6 +372,11 @@ def _replay(args: argparse.Namespace) -> int:
                             progress=bar.update)
     except (LogFormatError, ValueError) as error:
         raise InputError(str(error)) from None
+    if result.quality is not None and result.quality.vertices_per_scan == 0.0:
+        raise InputError(
+            f"{args.log}: <file>: no polyline in any of its {result.scans} scans (are all "
+            "ranges NaN, inf or beyond --max-range?); nothing to map"
+        )
     metrics = write_replay_outputs(result, out, log_name=name, figures=not args.no_figures)
     table, quality = metrics["table1_cm"], metrics["extraction"]
     alignment = metrics["alignment"]
@@ -417,7 +422,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return handlers[args.command](args)
     except (SpecError, InputError) as error:
-        print(f"error: {error}", file=sys.stderr)
+        # One line, whatever a library put into the message.
+        print("error: " + " ".join(str(error).split()), file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted; earlier results are left as they were", file=sys.stderr)
