@@ -17,10 +17,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from tqdm import tqdm
-
 from scenarios.output_dir import check_output_dir, stage_and_publish
-from scenarios.progress import count_progress, sim_progress
+from scenarios.progress import count_progress, scan_progress, sim_progress
 from scenarios.tune import add_parser as add_tune_parser
 from scenarios.tune import main_tune
 from worlds.errors import SpecError
@@ -367,9 +365,9 @@ def _replay(args: argparse.Namespace) -> int:
     name = args.log.name.split(".")[0]
     out = check_output_dir(args.out if args.out is not None else Path("results") / f"replay-{name}")
     try:
-        with tqdm(desc=name, unit="scan", disable=not sys.stderr.isatty(), leave=False) as bar:
+        with scan_progress(f"replay {name}") as advance:
             result = replay(open_log(args.log, lenient=args.lenient), options,
-                            progress=bar.update)
+                            progress=advance)
     except (LogFormatError, ValueError) as error:
         raise InputError(str(error)) from None
     if result.quality is not None and result.quality.vertices_per_scan == 0.0:

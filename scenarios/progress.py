@@ -20,7 +20,10 @@ from collections.abc import Callable, Iterator
 
 from tqdm import tqdm
 
-__all__ = ["count_progress", "sim_progress"]
+__all__ = ["SCANS_PER_LINE", "count_progress", "scan_progress", "sim_progress"]
+
+SCANS_PER_LINE = 500
+"""Off a terminal, :func:`scan_progress` prints one line per this many scans."""
 
 
 def _line(text: str) -> None:
@@ -81,3 +84,25 @@ def count_progress(total: int, label: str, unit: str) -> Iterator[Callable[[str]
         return
     with tqdm(total=total, desc=label, unit=unit, leave=False) as bar:
         yield lambda _what: bar.update(1)
+
+
+@contextlib.contextmanager
+def scan_progress(label: str) -> Iterator[Callable[[int], None]]:
+    """Yield a callback advancing by a number of scans (the total is not known).
+
+    Off a terminal it prints ``label: started`` and then a line every ``SCANS_PER_LINE``.
+    """
+    if not sys.stderr.isatty():
+        state = {"done": 0, "next": SCANS_PER_LINE}
+
+        def report(scans: int = 1) -> None:
+            state["done"] += scans
+            if state["done"] >= state["next"]:
+                state["next"] += SCANS_PER_LINE
+                _line(f"{label}: {state['done']} scans")
+
+        _line(f"{label}: started")
+        yield report
+        return
+    with tqdm(desc=label, unit="scan", leave=False) as bar:
+        yield bar.update
