@@ -170,17 +170,25 @@ def _leftovers(folder: Path) -> list[str]:
                   or ".previous-" in path.name)
 
 
-@pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
-def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, kind):
+def _interrupted(tmp_path: Path, kind: str, signal_number: int) -> tuple[Path, str, str, int]:
+    """Start ``kind`` over an earlier result, signal it while it works, wait for the end.
+
+    Returns the output directory, the earlier result's text, stderr and the exit status.
+    """
     out = tmp_path / "results"
     old = _previous_result(out)
     args, marker, workers = _command(kind, tmp_path, out)
     process = _start(args, out, tmp_path)
     children = _wait_until_working(process, marker, workers)
-    process.send_signal(signal.SIGINT)
+    process.send_signal(signal_number)
     _wait_stopped(process, children)
-    err = process.stderr.read()
-    assert process.returncode == 130, err
+    return out, old, process.stderr.read(), process.returncode
+
+
+@pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
+def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, kind):
+    out, old, err, status = _interrupted(tmp_path, kind, signal.SIGINT)
+    assert status == 130, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("interrupted")
     assert (out / "metrics.json").read_text() == old
@@ -189,13 +197,7 @@ def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, 
 
 @pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
 def test_sigkill_leaves_no_process_and_the_next_command_cleans_up(tmp_path, kind):
-    out = tmp_path / "results"
-    old = _previous_result(out)
-    args, marker, workers = _command(kind, tmp_path, out)
-    process = _start(args, out, tmp_path)
-    children = _wait_until_working(process, marker, workers)
-    process.kill()
-    _wait_stopped(process, children)
+    out, old, _, _ = _interrupted(tmp_path, kind, signal.SIGKILL)
     assert (out / "metrics.json").read_text() == old
     # A staging directory a killed run left behind (it may have been killed mid-write).
     (tmp_path / f".results.staging-{_dead_pid()}-x").mkdir()
