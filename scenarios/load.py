@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import tomllib
 import typing
 from collections.abc import Iterable, Iterator, Mapping
@@ -27,6 +28,7 @@ from semistatic.params import MapperParams
 from worlds.errors import SpecError, join_key
 from worlds.validation import (
     FILE_KEY,
+    Range,
     as_table,
     convert,
     did_you_mean,
@@ -37,6 +39,7 @@ from worlds.validation import (
 
 __all__ = [
     "DATA_DIR",
+    "MAPPER_BOUNDS",
     "OVERRIDE_FILE",
     "bundled_scenarios",
     "load_scenario",
@@ -51,6 +54,23 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 
 OVERRIDE_FILE = "--set"
 """The ``file`` named in errors about command-line overrides."""
+
+
+MAPPER_BOUNDS = {
+    "outlier_k": Range(ge=1, le=50),
+    "outlier_alpha": Range(gt=0.0, le=100.0),
+    "breakpoint_lambda": Range(gt=0.0, lt=round(math.pi / 2, 4)),
+    "breakpoint_sigma_r": Range(ge=0.0, le=1.0),
+    "min_points": Range(ge=2, le=1000),
+    "epsilon": Range(gt=0.0, le=1.0),
+    "max_range": Range(gt=0.0, le=100.0),
+    "gate": Range(gt=0.0, le=5.0),
+    "miss_limit": Range(ge=1, le=1000),
+    "visibility_margin": Range(ge=0.0, le=10.0),
+}
+"""Physical bounds of the mapper thresholds in files and options (m, rad, counts): a
+laser reaches at most 100 m, a polyline tolerance beyond 1 m or a gate beyond 5 m maps
+nothing real. :class:`MapperParams` itself checks only what the algorithms need."""
 
 
 def bundled_scenarios() -> tuple[str, ...]:
@@ -199,7 +219,7 @@ def mapper_from_table(
     >>> mapper_from_table({"max_range": -1.0}, file="--max-range", key="")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --max-range: max_range: must be > 0 (got -1.0): metres, ...
+    worlds.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0
     """
     table = as_table(value, file=file, key=key)
     keys = _known_keys(MapperParams)
@@ -209,7 +229,8 @@ def mapper_from_table(
         hint = keys[name]
         if typing.get_origin(hint) is typing.Literal:
             hint = str
-        kwargs[name] = convert(hint, raw, file=file, key=join_key(key, name))
+        kwargs[name] = convert(hint, raw, file=file, key=join_key(key, name),
+                               valid=MAPPER_BOUNDS.get(name))
     try:
         return (base or MapperParams()).replace(**kwargs)
     except ValueError as error:

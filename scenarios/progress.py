@@ -90,7 +90,8 @@ def count_progress(total: int, label: str, unit: str) -> Iterator[Callable[[str]
 def scan_progress(label: str) -> Iterator[Callable[[int], None]]:
     """Yield a callback advancing by a number of scans (the total is not known).
 
-    Off a terminal it prints ``label: started`` and then a line every ``SCANS_PER_LINE``.
+    Off a terminal it prints ``label: N scans`` every ``SCANS_PER_LINE`` scans (nothing
+    before the first, so that a log rejected at once gives its one error line alone).
     """
     if not sys.stderr.isatty():
         state = {"done": 0, "next": SCANS_PER_LINE}
@@ -101,7 +102,6 @@ def scan_progress(label: str) -> Iterator[Callable[[int], None]]:
                 state["next"] += SCANS_PER_LINE
                 _line(f"{label}: {state['done']} scans")
 
-        _line(f"{label}: started")
         yield report
         return
     with tqdm(desc=label, unit="scan", leave=False) as bar:

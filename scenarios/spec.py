@@ -46,6 +46,17 @@ class Rates:
     The defaults follow DESIGN.md: 240 Hz physics, 50 Hz control, a 25 Hz localization laser
     (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300, 80 ms scan time). With the
     ``pioneer3dx`` preset one LMS100 serves both roles; each role then uses its own rate.
+
+    Parameters
+    ----------
+    physics_hz
+        Physics steps per second (Hz); every other rate is scheduled on it.
+    control_hz
+        Follower commands per second (Hz).
+    localization_hz
+        Scans of the localization laser per second (Hz).
+    safety_hz
+        Scans of the safety laser per second (Hz); each also updates the map.
     """
 
     physics_hz: float = field(default=240.0, metadata=bounds(ge=60.0, le=2000.0))
@@ -64,7 +75,15 @@ class Rates:
 
 @dataclass(frozen=True)
 class Noise:
-    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values)."""
+    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values).
+
+    Parameters
+    ----------
+    odometry
+        Factor on the wheel-encoder slip noise (0 = noise-free odometry).
+    range
+        Factor on the lasers' range noise (0 = exact ranges).
+    """
 
     odometry: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
     range: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
@@ -84,6 +103,19 @@ class SafetySettings:
     known semi-static object of the current segment no longer count, except inside the
     ``min_protective_depth`` (m) nearest part of the protective field, which is never given
     up.
+
+    Parameters
+    ----------
+    slowdown
+        Speed factor while the warning field is occupied.
+    release_delay
+        Time (s) a reaction lasts after its field clears.
+    min_points
+        Readings that must fall in a field before it counts.
+    adaptive_margin
+        Distance (m) from a known object within which readings no longer count (adaptive).
+    min_protective_depth
+        Depth (m) of the protective field that the adaptive policy never gives up.
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
@@ -102,6 +134,19 @@ class BoxMove:
 
     ``action`` is ``move`` (needs ``pose``), ``add`` (needs ``pose`` and ``size``) or
     ``remove``. Moves happen while the robot is back at the start, i.e. not observing.
+
+    Parameters
+    ----------
+    lap
+        The lap before which the change happens (2 or later).
+    action
+        ``move``, ``add`` or ``remove``.
+    box
+        Name of the box (a new name for ``add``).
+    pose
+        ``[x, y, yaw]`` of the box centre (m, m, rad), for ``move`` and ``add``.
+    size
+        ``[sx, sy, sz]`` edges of the box (m); required for ``add``, optional for ``move``.
     """
 
     lap: int = field(metadata=bounds(ge=2, le=MAX_LAPS))
@@ -122,7 +167,42 @@ class BoxMove:
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """One experiment. ``world`` is a bundled world name or a path (relative to the file)."""
+    """One experiment. ``world`` is a bundled world name or a path (relative to the file).
+
+    Parameters
+    ----------
+    name
+        Name of the experiment (default: the file's stem); results go to
+        ``results/NAME``, so it is a plain name, not a path.
+    world
+        A bundled world name or a ``.toml`` path, relative to the scenario file.
+    robot
+        Robot preset: ``pioneer3dx`` or ``lgv``.
+    laps
+        Laps to drive.
+    seed
+        Seed of every random stream (noise, people).
+    policy
+        Safety-field policy: ``conservative`` or ``adaptive``.
+    description
+        Free text.
+    people
+        Names of the world's people to switch on.
+    lap_timeout
+        Simulated time (s) after which a lap that has not reached the path end fails.
+    rates
+        Update rates (table ``[rates]``).
+    noise
+        Noise scale factors (table ``[noise]``).
+    safety
+        Safety supervisor and field policy (table ``[safety]``).
+    mapper
+        Mapper thresholds (table ``[mapper]``).
+    moves
+        Box changes between laps (array of tables ``[[moves]]``).
+    source
+        Set by the loader to the file read; not a key of the file.
+    """
 
     name: str = field(metadata=safe_name())
     world: str

@@ -108,6 +108,19 @@ def _rectangle(center: np.ndarray, yaw: float, length: float, width: float) -> n
 class WallSpec:
     """A straight wall from ``start`` to ``end`` (centre line), ``thickness`` wide.
 
+    Parameters
+    ----------
+    start
+        ``[x, y]`` of one end of the centre line (m).
+    end
+        ``[x, y]`` of the other end (m).
+    thickness
+        Wall thickness (m).
+    height
+        Wall height (m).
+    remission
+        Share of laser light reflected (0-1); posts read above 0.9, walls well below.
+
     Examples
     --------
     >>> wall = WallSpec((0.0, 0.0), (4.0, 0.0), thickness=0.2)
@@ -148,6 +161,19 @@ class WallSpec:
 class PostSpec:
     """A reflective landmark post: a vertical cylinder with high remission.
 
+    Parameters
+    ----------
+    x
+        x of the post centre (m).
+    y
+        y of the post centre (m).
+    radius
+        Post radius (m).
+    height
+        Post height (m).
+    remission
+        Share of laser light reflected (0-1): high, so the localizer picks it out.
+
     Examples
     --------
     >>> PostSpec(1, 2).xy
@@ -172,6 +198,17 @@ class PostSpec:
 @dataclass(frozen=True)
 class BoxSpec:
     """A semi-static box: ``size`` (sx, sy, sz) centred at ``pose`` (x, y, yaw) on the floor.
+
+    Parameters
+    ----------
+    name
+        Unique name (moves refer to it).
+    size
+        ``[sx, sy, sz]`` edges of the box (m).
+    pose
+        ``[x, y, yaw]`` of the box centre on the floor (m, m, rad).
+    remission
+        Share of laser light reflected (0-1).
 
     Examples
     --------
@@ -202,6 +239,29 @@ class PersonSpec:
     waypoint and stays there (or loops back to the first when ``loop``). A world may
     carry people that are off (``enabled = false``) for scenarios to switch on with
     :meth:`WorldSpec.enable_people`.
+
+    Parameters
+    ----------
+    name
+        Unique name (scenarios switch people on by it).
+    waypoints
+        ``[[x, y], ...]`` the person walks through (m).
+    radius
+        Radius of the body cylinder (m).
+    height
+        Height of the body cylinder (m).
+    speed
+        Walking speed (m/s).
+    start_time
+        When the walk starts (s), from the run or, with ``per_lap``, the lap start.
+    loop
+        Walk back to the first waypoint and start again.
+    per_lap
+        Restart the walk at every lap.
+    remission
+        Share of laser light reflected (0-1).
+    enabled
+        Spawned unless a scenario leaves it off (``false``: only when a scenario names it).
 
     Examples
     --------
@@ -256,6 +316,19 @@ class SegmentSpec:
     ``warning`` and ``protective`` are simple polygons in the robot frame; the protective
     field lies inside the warning field. The segment's local-map frame is anchored at the
     path pose of ``start_knot``.
+
+    Parameters
+    ----------
+    name
+        Unique segment name (local maps are kept per segment).
+    start_knot
+        Index of the knot where the segment starts.
+    end_knot
+        Index of the knot where it ends.
+    warning
+        Warning field polygon ``[[x, y], ...]`` in the robot frame (m).
+    protective
+        Protective field polygon ``[[x, y], ...]`` in the robot frame (m), inside warning.
 
     Examples
     --------
@@ -322,6 +395,15 @@ class PathSpec:
     ``speed`` is the nominal forward speed u1r (m/s) the follower tracks. Segments are
     listed in path order and cover it without gaps: the first starts at knot 0, each
     starts where the previous ended, the last ends at the last knot.
+
+    Parameters
+    ----------
+    knots
+        ``[[x, y], ...]`` the spline passes through, in driving order (m).
+    segments
+        The segments, in path order (array of tables ``[[path.segments]]``).
+    speed
+        Nominal forward speed the follower tracks (m/s).
 
     Examples
     --------
@@ -409,6 +491,25 @@ class WorldSpec:
     """A whole environment. ``source`` is the file it was loaded from (for messages).
 
     Posts must not overlap each other or a wall; names of boxes and people are unique.
+
+    Parameters
+    ----------
+    name
+        World name (default: the file's stem).
+    walls
+        Static walls (array of inline tables).
+    posts
+        Reflective landmark posts (array of inline tables).
+    boxes
+        Semi-static boxes (array of tables ``[[boxes]]``).
+    people
+        People walking (array of tables ``[[people]]``).
+    path
+        The robot's path and its segments (table ``[path]``).
+    description
+        Free text.
+    source
+        Set by the loader to the file read; not a key of the file.
 
     Examples
     --------

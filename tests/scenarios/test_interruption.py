@@ -106,7 +106,7 @@ def _command(kind: str, tmp_path: Path, out: Path) -> tuple[list[str], str | Non
         return (["tune", str(scenario), "--laps", "5", "--jobs", "2", "--no-figures",
                  "--grid", "mapper.gate=0.08,0.12,0.16"], None, 2)
     log = _corridor_log(tmp_path / "corridor.log.gz", passes=200)
-    return ["replay", str(log), "--no-figures", "--tile", "2"], "replay corridor: started", 0
+    return ["replay", str(log), "--no-figures", "--tile", "2"], "replay corridor: 500 scans", 0
 
 
 def _start(args: list[str], out: Path, cwd: Path) -> subprocess.Popen:
