@@ -388,7 +388,7 @@ def sweep_points(
     >>> sweep_points("pal1", {"mapper.gate": [0.1, -0.1]})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gate: MapperParams.gate must be > 0 (got -0.1): ...
+    worlds.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1
     """
     grids = {key: tuple(values) for key, values in grids.items()}
     for key, values in grids.items():
@@ -690,7 +690,7 @@ def write_sweep(
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     summary = write_sweep(results, Path(tmp) / "sweep", figures=False)
     ...     sorted(path.name for path in (Path(tmp) / "sweep").iterdir())
-    ['sweep.csv', 'sweep.json']
+    ['.semistatic-result', 'sweep.csv', 'sweep.json']
     >>> summary["best"]["settings"], summary["best"]["table1_mean_avg_cm"]
     ({'mapper.gate': 0.12}, 2.4)
     """

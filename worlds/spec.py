@@ -523,7 +523,7 @@ class WorldSpec:
 radii 0.04 + 0.04 m)
     """
 
-    name: str = field(metadata=safe_name())
+    name: str
     walls: tuple[WallSpec, ...]
     posts: tuple[PostSpec, ...]
     boxes: tuple[BoxSpec, ...]
