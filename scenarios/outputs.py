@@ -33,6 +33,7 @@ from scenarios.figures import (
     plot_tangent_histograms,
 )
 from scenarios.metrics import detection_scores, localization_metrics, table1_cm
+from scenarios.policies import policy_name
 from scenarios.runner import RunLog
 
 __all__ = [
@@ -83,7 +84,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
         "laps": spec.laps,
         "world": log.world.name,
         "robot": log.robot.name,
-        "policy": spec.policy,
+        "policy": policy_name(spec.policy),
         "table1_cm": table1_cm(log.table1_distances),
         "detection": {
             "precision": overall["precision"],
@@ -214,7 +215,8 @@ def write_outputs(
     metrics = summarize(log)
     if comparison is not None:
         other = comparison
-        pair = (metrics, other) if log.spec.policy == "conservative" else (other, metrics)
+        conservative = policy_name(log.spec.policy) == "conservative"
+        pair = (metrics, other) if conservative else (other, metrics)
         metrics["policy_comparison"] = policy_comparison(*pair)
 
     def fill(staging: Path) -> None:
