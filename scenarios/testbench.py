@@ -61,6 +61,7 @@ from sim.contacts import ContactMonitor
 from sim.encoders import WheelEncoders
 from sim.laser import RaycastLaser
 from sim.people import People
+from sim.random_streams import RandomStreams
 from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from worlds.spec import BoxSpec, WorldSpec
@@ -81,14 +82,18 @@ class _Robot:
     """The simulated vehicle and its onboard stack for one run (not part of the API)."""
 
     def __init__(self, sim: SimClient, world: SimWorld, spec: ScenarioSpec, robot: UGVSpec,
-                 path: SplinePath, rng: np.random.Generator) -> None:
+                 path: SplinePath, streams: RandomStreams) -> None:
         self.spec = robot
         self.start = path.pose(0.0)
         self.body = SimUGV(sim, robot, self.start)
-        self.encoders = WheelEncoders(_scaled_robot(robot, spec.noise.odometry), rng)
+        # Each noisy component draws from its own stream (sim.random_streams).
+        self.encoders = WheelEncoders(
+            _scaled_robot(robot, spec.noise.odometry), streams.generator("encoders")
+        )
         localization_spec = _scaled_laser(robot.localization_laser.laser, spec.noise.range)
         self.localization_laser = RaycastLaser(
-            sim, localization_spec, world, rng, ignore_body_ids=(self.body.body_id,)
+            sim, localization_spec, world, streams.generator("laser/localization"),
+            ignore_body_ids=(self.body.body_id,),
         )
         self.shared_laser = robot.safety_laser is robot.localization_laser
         if self.shared_laser:
@@ -96,7 +101,8 @@ class _Robot:
         else:
             safety_spec = _scaled_laser(robot.safety_laser.laser, spec.noise.range)
             self.safety_laser = RaycastLaser(
-                sim, safety_spec, world, rng, ignore_body_ids=(self.body.body_id,)
+                sim, safety_spec, world, streams.generator("laser/safety"),
+                ignore_body_ids=(self.body.body_id,),
             )
         self.localization_mount = robot.localization_laser
         self.safety_mount = robot.safety_laser
@@ -226,11 +232,11 @@ class Testbench:
         self.segments: tuple[PathSegment, ...] = path_segments(base_world, path)
         self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec,
                           segments=self.segments)
-        rng = np.random.default_rng(spec.seed)
+        self.streams = RandomStreams(spec.seed)
         rates = spec.rates
         self._sim = sim = SimClient(gui=self.gui, time_step=1.0 / rates.physics_hz)
         self.world = SimWorld(sim, base_world)
-        self._robot = _Robot(sim, self.world, spec, self._robot_spec, path, rng)
+        self._robot = _Robot(sim, self.world, spec, self._robot_spec, path, self.streams)
         self._people = People(self.world)
         self._contacts = ContactMonitor(sim, self._robot.body.body_id, self.world)
         self._control = Schedule(rates.control_hz, rates.physics_hz)
@@ -375,6 +381,11 @@ class Testbench:
         return self._robot.body.true_pose()
 
     @property
+    def true_twist(self) -> np.ndarray:
+        """Return the simulator's true ``(v_forward, v_left, omega)`` of the robot (m/s, rad/s)."""
+        return self._robot.body.true_twist()
+
+    @property
     def ekf_pose(self) -> np.ndarray:
         """Return the EKF's robot pose estimate ``(x, y, theta)``, world frame."""
         return self._robot.ekf.pose
@@ -408,6 +419,26 @@ class Testbench:
     def sim(self) -> SimClient:
         """Return the PyBullet client (e.g. for drawing or a camera); ``None`` once closed."""
         return self._sim
+
+    def random_stream(self, name: str) -> np.random.Generator:
+        """Return a generator on the run's stream for component ``name`` (e.g. a script's).
+
+        Streams are spawned from the run's seed by name (:mod:`sim.random_streams`), so
+        a script's draws never change the robot's noise. The robot's own components use
+        ``encoders``, ``laser/localization`` and ``laser/safety``.
+
+        Examples
+        --------
+        >>> with Testbench("pal1") as bench:
+        ...     bench.reset(seed=1)
+        ...     first = bench.random_stream("pusher").uniform()
+        ...     bench.reset(seed=1)
+        ...     first == bench.random_stream("pusher").uniform()
+        True
+        """
+        if self.log is None:
+            raise RuntimeError("Testbench: call reset() first (the streams come from its seed)")
+        return self.streams.generator(name)
 
     # ------------------------------------------------------------------ boxes
     def move_box(self, name: str, pose: tuple[float, float, float]) -> None:

@@ -237,3 +237,25 @@ def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b():
 def test_every_bundled_scenario_repeats_itself_exactly(name):
     spec = load_scenario(name, overrides=["laps=2"])
     assert_same_run(run_scenario(spec), run_scenario(spec))
+
+
+class RandomPusher:
+    """Draws from its own stream every tick, as a script moving boxes at random would."""
+
+    def __init__(self):
+        self.draws = 0
+
+    def on_lap_start(self, bench, lap):
+        self.rng = bench.random_stream(f"pusher/lap{lap}")
+
+    def on_tick(self, bench):
+        self.rng.standard_normal(16)
+        self.draws += 16
+
+
+def test_a_script_drawing_random_numbers_leaves_the_robots_noise_alone(tiny_spec, tiny_log):
+    pusher = RandomPusher()
+    with Testbench(tiny_spec) as bench:
+        bench.add_observer(pusher)
+        assert_same_run(bench.run(), tiny_log)
+    assert pusher.draws > 10_000
