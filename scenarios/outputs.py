@@ -32,7 +32,12 @@ from scenarios.figures import (
     plot_polygonal_map,
     plot_tangent_histograms,
 )
-from scenarios.metrics import detection_scores, localization_metrics, table1_cm
+from scenarios.metrics import (
+    detection_scores,
+    ekf_correction_metrics,
+    localization_metrics,
+    table1_cm,
+)
 from scenarios.policies import policy_name
 from scenarios.runner import RunLog
 
@@ -77,6 +82,12 @@ def summarize(log: RunLog) -> dict[str, Any]:
         f"lap_{lap.lap:02d}/{name}": value for lap in laps for name, value in lap.latencies.items()
     }
     localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)
+    history = log.ekf_history
+    if len(history.get("stamp", ())):
+        # Fig. 5's figures: lap-start re-localisations are jumps, not corrections.
+        localization["ekf_corrections"] = ekf_correction_metrics(
+            history["correction"], history["sigma"], history["reinitialized"]
+        )
     wall, engine = log.wall_time_s, log.engine_time_s
     return {
         "scenario": spec.name,
@@ -188,6 +199,7 @@ def _figures(log: RunLog, staging: Path) -> None:
         plot_ekf_corrections(
             history["stamp"], history["correction"], history["sigma"],
             folder / "ekf_corrections.png", title=f"{name}: EKF corrections (paper Fig. 5)",
+            reinitialized=history["reinitialized"],
         )
     if log.example_pair is not None:
         plot_tangent_histograms(
