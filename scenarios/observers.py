@@ -43,12 +43,16 @@ from scenarios.metrics import match_polylines_to_boxes, score_lap
 from scenarios.records import LapLog, ScanRecord
 from scenarios.spec import ScenarioSpec
 from semistatic.frames import transform_points
+from sim.debug_view import DebugView
 from sim.ground_truth import box_outlines
 
 __all__ = [
+    "GUI_REFRESH_HZ",
     "OBSERVED_DISTANCE",
     "OBSERVED_READINGS",
+    "STATUS_COLOURS",
     "GroundTruthScoring",
+    "GuiView",
     "ProgressReporter",
     "ScanCallback",
     "Table1Reference",
@@ -60,6 +64,21 @@ OBSERVED_READINGS = 5
 
 OBSERVED_DISTANCE = 0.03
 """Metres from a true box outline within which a reading counts as a hit on the box."""
+
+
+GUI_REFRESH_HZ = 4.0
+"""Redraws per simulated second of the GUI's debug items (each redraw costs a frame)."""
+
+STATUS_COLOURS = {
+    "new": (0.1, 0.45, 1.0),
+    "confirmed": (0.0, 0.65, 0.0),
+    "blank": (0.55, 0.55, 0.55),
+}
+"""Colour (RGB) of a local-map polyline by its life-cycle status."""
+
+WARNING_COLOUR = (1.0, 0.6, 0.0)
+PROTECTIVE_COLOUR = (0.9, 0.0, 0.0)
+RETURNS_COLOUR = (0.75, 0.0, 0.75)
 
 
 def moved_boxes(spec: ScenarioSpec, lap: int) -> tuple[str, ...]:
@@ -251,3 +270,66 @@ class ScanCallback:
     def on_scan(self, bench, record: ScanRecord) -> None:
         """Pass the record on."""
         self.callback(record)
+
+
+class GuiView:
+    """Show the run in PyBullet's window (the bench adds it when ``gui=True``).
+
+    A few times per simulated second (``refresh_hz``) the camera is put above the robot
+    and the debug items are redrawn: the current segment's warning (orange) and
+    protective (red) fields where the EKF places the robot, the last safety scan's
+    returns (magenta) and every local map's polylines, coloured by life-cycle status
+    (:data:`STATUS_COLOURS`). Headless, it draws nothing.
+
+    Examples
+    --------
+    >>> GuiView().refresh_hz
+    4.0
+    """
+
+    reads_map_polylines = False
+
+    def __init__(self, refresh_hz: float = GUI_REFRESH_HZ) -> None:
+        self.refresh_hz = float(refresh_hz)
+        self.view: DebugView | None = None
+        self._returns = np.empty((0, 2))
+        self._drawn_at = -np.inf
+
+    def on_lap_start(self, bench, lap: int) -> None:
+        """Bind to the bench's client and draw at once: the robot is back at the start."""
+        if self.view is None or self.view.sim is not bench.sim:
+            self.view = DebugView(bench.sim)
+        self._returns = np.empty((0, 2))
+        self.draw(bench)
+
+    def on_scan(self, bench, record: ScanRecord) -> None:
+        """Keep the scan's returns (world frame) for the next redraw."""
+        scan = record.scan
+        self._returns = scan.world_points()[scan.valid_mask()]
+
+    def on_tick(self, bench) -> None:
+        """Redraw when ``1 / refresh_hz`` simulated seconds have passed."""
+        if bench.sim_time - self._drawn_at >= 1.0 / self.refresh_hz:
+            self.draw(bench)
+
+    def draw(self, bench) -> None:
+        """Move the camera and redraw every item now."""
+        view = self.view
+        if view is None or not view.active:
+            return
+        self._drawn_at = bench.sim_time
+        view.follow(bench.true_pose)
+        pose, fields = bench.ekf_pose, bench.segment.fields
+        view.draw_polylines(
+            "fields",
+            [transform_points(pose, fields.warning), transform_points(pose, fields.protective)],
+            [WARNING_COLOUR, PROTECTIVE_COLOUR],
+            closed=True,
+        )
+        view.draw_points("returns", self._returns, RETURNS_COLOUR)
+        lines, colours = [], []
+        for local_map in bench.local_maps.values():
+            for map_id, line in local_map.world_polylines().items():
+                lines.append(line.points)
+                colours.append(STATUS_COLOURS[local_map[map_id].status])
+        view.draw_polylines("maps", lines, colours, width=3.0)

@@ -47,7 +47,7 @@ from robots.presets import UGVSpec
 from robots.safety import FieldState, SafetyPolicy, SafetySupervisor, scan_points_in_robot_frame
 from scenarios.layout import lap_worlds, robot_preset
 from scenarios.load import load_scenario
-from scenarios.observers import GroundTruthScoring, Table1Reference
+from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference
 from scenarios.policies import FieldPolicy, FieldView, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord, Schedule
 from scenarios.segments import PathSegment, path_segments, segment_index
@@ -191,6 +191,8 @@ class Testbench:
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
         self.observers: list = [GroundTruthScoring(), Table1Reference()]
+        if self.gui:
+            self.observers.append(GuiView())
         self.log: RunLog | None = None
         self._sim: SimClient | None = None
         self._hooks: dict | None = None
