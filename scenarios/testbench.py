@@ -275,7 +275,17 @@ class Testbench:
         self._begin_lap(1)
 
     def close(self) -> None:
-        """Disconnect from PyBullet (the log stays readable); safe to call twice."""
+        """Disconnect from PyBullet (the log stays readable); safe to call twice.
+
+        Examples
+        --------
+        >>> bench = Testbench("pal1")
+        >>> bench.reset()
+        >>> bench.close()
+        >>> bench.close()
+        >>> bench.sim is None, bench.log.spec.name
+        (True, 'pal1')
+        """
         if self._sim is not None:
             self._sim.close()
             self._sim = None
@@ -291,6 +301,15 @@ class Testbench:
         """Advance one physics tick; at the end of a lap, set up the next one.
 
         Raises ``RuntimeError`` before :meth:`reset` and after the last lap.
+
+        Examples
+        --------
+        >>> with Testbench("pal1") as bench:
+        ...     bench.reset()
+        ...     start = bench.sim_time
+        ...     bench.step()
+        ...     round((bench.sim_time - start) * 240)
+        1
         """
         self._require_running()
         sim, robot = self._sim, self._robot
@@ -444,7 +463,23 @@ class Testbench:
 
     # ------------------------------------------------------------------ boxes
     def move_box(self, name: str, pose: tuple[float, float, float]) -> None:
-        """Teleport semi-static box ``name`` to ``pose`` = (x, y, yaw) now."""
+        """Teleport semi-static box ``name`` to ``pose`` = (x, y, yaw) now.
+
+        :meth:`add_box` and :meth:`remove_box` likewise change the boxes at once; the
+        scenario's layout of the next lap replaces them when that lap is set up.
+
+        Examples
+        --------
+        >>> from worlds.spec import BoxSpec
+        >>> with Testbench("pal1") as bench:
+        ...     bench.reset()
+        ...     bench.move_box("carton_west", (2.5, -0.75, 0.0))
+        ...     bench.add_box(BoxSpec("crate", (0.4, 0.4, 0.5), (6.0, 0.9, 0.0)))
+        ...     bench.remove_box("trolley_niche")
+        ...     [(box.name, box.pose) for box in bench.world.boxes]
+        [('carton_west', (2.5, -0.75, 0.0)), ('crate_corridor', (6.4, 1.0, 0.3)), \
+('crate', (6.0, 0.9, 0.0))]
+        """
         self._require_running()
         self.world.move_box(name, tuple(float(value) for value in pose))
         self.layout_revision += 1
