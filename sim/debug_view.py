@@ -127,12 +127,17 @@ class DebugView:
         xy = np.asarray(points, dtype=float).reshape(-1, 2)
         xy = xy[np.isfinite(xy).all(axis=1)]
         bullet = self.sim.bullet
-        for item in self.items.pop(name, []):
-            bullet.removeUserDebugItem(item)
+        old = self.items.pop(name, [])
         if len(xy) == 0:
+            for item in old:
+                bullet.removeUserDebugItem(item)
             return
         positions = np.column_stack([xy, np.full(len(xy), DRAW_HEIGHT)]).tolist()
-        item = bullet.addUserDebugPoints(positions, [list(colour)] * len(positions), size)
+        # Replaced in place: removing first would leave the GUI a frame without the points.
+        replace = {"replaceItemUniqueId": old[0]} if old else {}
+        item = bullet.addUserDebugPoints(
+            positions, [list(colour)] * len(positions), size, **replace
+        )
         self.items[name] = [item]
 
     def clear(self) -> None:

@@ -17,6 +17,7 @@ import json
 import struct
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,10 @@ from scenarios.observers import GuiView
 # Drawing colours as 8-bit RGB, as the GUI renders them (scenarios.observers).
 COLOURS = {"warning": (255, 153, 0), "protective": (229, 0, 0), "returns": (191, 0, 191),
            "confirmed": (0, 165, 0)}
+
+
+GUI_SETTLE_S = 1.0
+"""Wall seconds to wait before the screenshot."""
 
 
 def read_xwd(path: Path) -> np.ndarray:
@@ -66,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         camera = bench.sim.bullet.getDebugVisualizerCamera()
         width, height = camera[0], camera[1]
         view = next(o for o in bench.observers if isinstance(o, GuiView)).view
+        time.sleep(GUI_SETTLE_S)  # the GUI renders on its own thread: let it show the last draw
         with tempfile.TemporaryDirectory() as folder:
             dump = Path(folder) / "screen.xwd"
             subprocess.run(["xwd", "-root", "-silent", "-out", str(dump)], check=True)
