@@ -24,8 +24,8 @@ from scenarios.load import (
     scenario_from_toml,
 )
 from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
+from semistatic.errors import SpecError
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems
-from worlds.errors import SpecError
 from worlds.load import DATA_DIR as WORLD_DATA_DIR
 from worlds.load import load_world
 

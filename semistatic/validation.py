@@ -28,7 +28,7 @@ Box(name='a', size=(0.4, 0.4, 0.5))
 >>> from_table(Box, {"name": "a", "sise": [1, 1, 1]}, file="w.toml", key="boxes[0]")
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: w.toml: boxes[0].sise: unknown key (did you mean 'size'?); \
+semistatic.errors.SpecError: w.toml: boxes[0].sise: unknown key (did you mean 'size'?); \
 allowed keys: name, size
 """
 
@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from worlds.errors import MEMORY, SpecError, join_key
+from semistatic.errors import MEMORY, SpecError, join_key
 
 __all__ = [
     "FILE_KEY",
@@ -199,7 +199,7 @@ def reject_unknown_keys(
     >>> reject_unknown_keys({"radus": 1.0}, ["radius", "height"], file="f", key="posts[0]")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: posts[0].radus: unknown key (did you mean 'radius'?); \
+    semistatic.errors.SpecError: f: posts[0].radus: unknown key (did you mean 'radius'?); \
 allowed keys: height, radius
     """
     allowed = sorted(allowed)
@@ -240,7 +240,7 @@ def as_float(value: Any, *, file: str, key: str, valid: Range | None = None) -> 
     >>> as_float(-1.0, file="f", key="speed", valid=Range(gt=0.0))
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: speed: must be > 0.0, got -1.0
+    semistatic.errors.SpecError: f: speed: must be > 0.0, got -1.0
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SpecError(file, key, f"expected a number, got {_describe(value)}")
@@ -261,7 +261,7 @@ def as_int(value: Any, *, file: str, key: str, valid: Range | None = None) -> in
     >>> as_int(3.0, file="f", key="end_knot")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: end_knot: expected an integer, got a float 3.0
+    semistatic.errors.SpecError: f: end_knot: expected an integer, got a float 3.0
     """
     if isinstance(value, bool) or not isinstance(value, int):
         raise SpecError(file, key, f"expected an integer, got {_describe(value)}")
@@ -307,7 +307,7 @@ def as_floats(
     >>> as_floats([1.0], 2, file="f", key="start")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: start: expected a list of 2 numbers, got 1 value(s)
+    semistatic.errors.SpecError: f: start: expected a list of 2 numbers, got 1 value(s)
     """
     if not isinstance(value, list):
         raise SpecError(file, key, f"expected a list of {n} numbers, got {_describe(value)}")
@@ -400,7 +400,7 @@ def from_table(
     >>> from_table(Post, {}, file="f", key="posts[0]")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: posts[0].x: missing required key
+    semistatic.errors.SpecError: f: posts[0].x: missing required key
     """
     fixed = dict(fixed or {})
     table = as_table(table, file=file, key=key)
@@ -479,7 +479,7 @@ def check_fields(obj: Any) -> None:
     >>> Wheel(radius=2).radius
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: radius: must be > 0.0 and <= 1.0, got 2.0
+    semistatic.errors.SpecError: <memory>: radius: must be > 0.0 and <= 1.0, got 2.0
     >>> Wheel(radius=np.float32(0.5)).radius
     0.5
     """
@@ -508,7 +508,7 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     >>> read_toml("/no/such/world.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: /no/such/world.toml: <file>: no such file
+    semistatic.errors.SpecError: /no/such/world.toml: <file>: no such file
     """
     path = Path(path)
     try:
