@@ -10,7 +10,7 @@ table, driven by the dataclass's own field types:
 - ``tuple[X, ...]``: a list whose items are converted as ``X``;
 - a nested dataclass: a (inline) table, converted recursively;
 - ``Range`` in a field's metadata (``field(metadata=bounds(gt=0.0))``) range-checks
-  the value, or every number in it.
+  the value, or every number in it; :func:`unlimited` also lets code pass ``math.inf``.
 
 Unknown keys are rejected at every level with a difflib "did you mean" suggestion.
 Errors raised by a dataclass's ``__post_init__`` as :class:`SpecError` with a key
@@ -65,9 +65,11 @@ __all__ = [
     "convert",
     "did_you_mean",
     "from_table",
+    "or_object",
     "read_toml",
     "reject_unknown_keys",
     "safe_name",
+    "unlimited",
 ]
 
 FILE_KEY = "<file>"
@@ -86,18 +88,24 @@ _TOML_POSITION = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 class Range:
     """Bounds a number must satisfy; ``None`` means unbounded on that side.
 
+    ``fix`` tells the user what a valid value looks like (units, a typical figure); it
+    ends every out-of-range message.
+
     Examples
     --------
     >>> Range(gt=0.0).describe()
     '> 0.0'
     >>> Range(ge=0.0, le=1.0).contains(1.5)
     False
+    >>> Range(gt=0.0, fix="metres, e.g. 0.1").complaint(-1.0)
+    'must be > 0.0, got -1.0 (metres, e.g. 0.1)'
     """
 
     gt: float | None = None
     ge: float | None = None
     lt: float | None = None
     le: float | None = None
+    fix: str = ""
 
     def contains(self, value: float) -> bool:
         """Return whether ``value`` satisfies every bound."""
@@ -117,6 +125,12 @@ class Range:
         ]
         return " and ".join(parts) if parts else "any value"
 
+    def complaint(self, got: Any, *, every: bool = False) -> str:
+        """Return the message for a value ``got`` outside the bounds (``every`` for lists)."""
+        subject = "every value must be" if every else "must be"
+        fix = f" ({self.fix})" if self.fix else ""
+        return f"{subject} {self.describe()}, got {got}{fix}"
+
 
 def bounds(
     *,
@@ -124,15 +138,32 @@ def bounds(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
+    fix: str = "",
 ) -> dict[str, Range]:
     """Return dataclass field metadata that range-checks the field on load.
+
+    ``fix`` (units, a typical value) is appended to the message of a value out of range.
 
     Examples
     --------
     >>> bounds(gt=0.0)
-    {'range': Range(gt=0.0, ge=None, lt=None, le=None)}
+    {'range': Range(gt=0.0, ge=None, lt=None, le=None, fix='')}
     """
-    return {"range": Range(gt=gt, ge=ge, lt=lt, le=le)}
+    return {"range": Range(gt=gt, ge=ge, lt=lt, le=le, fix=fix)}
+
+
+def unlimited() -> dict[str, bool]:
+    """Return field metadata for a limit that code may switch off with ``math.inf``.
+
+    Combine it with :func:`bounds`: ``metadata={**bounds(gt=0.0, le=20.0), **unlimited()}``.
+    Only ``+inf`` passes unchecked; any finite value must satisfy the bounds.
+
+    Examples
+    --------
+    >>> unlimited()
+    {'unlimited': True}
+    """
+    return {"unlimited": True}
 
 
 def safe_name() -> dict[str, bool]:
@@ -227,7 +258,7 @@ def as_table(value: Any, *, file: str, key: str) -> dict[str, Any]:
 
 def _check_range(value: float, valid: Range | None, *, file: str, key: str) -> None:
     if valid is not None and not valid.contains(value):
-        raise SpecError(file, key, f"must be {valid.describe()}, got {value}")
+        raise SpecError(file, key, valid.complaint(value))
 
 
 def as_float(value: Any, *, file: str, key: str, valid: Range | None = None) -> float:
@@ -319,9 +350,7 @@ def as_floats(
     )
     for number in numbers:
         if valid is not None and not valid.contains(number):
-            raise SpecError(
-                file, key, f"every value must be {valid.describe()}, got {list(numbers)}"
-            )
+            raise SpecError(file, key, valid.complaint(list(numbers), every=True))
     return numbers
 
 
@@ -428,12 +457,11 @@ def from_table(
 
 
 @functools.cache
-def _checked_fields(cls: type) -> tuple[tuple[str, Any, Range | None, bool, bool], ...]:
-    """Return ``(name, hint, range, safe name, or object)`` of the fields to convert."""
+def _checked_fields(cls: type) -> tuple[tuple[str, Any, Mapping[str, Any]], ...]:
+    """Return ``(name, type hint, metadata)`` of the fields :func:`check_fields` converts."""
     hints = typing.get_type_hints(cls)
     return tuple(
-        (field.name, hints[field.name], field.metadata.get("range"),
-         field.metadata.get("safe_name", False), field.metadata.get("or_object", False))
+        (field.name, hints[field.name], field.metadata)
         for field in dataclasses.fields(cls)
         if field.init and _is_plain(hints[field.name])
     )
@@ -465,8 +493,9 @@ def check_fields(obj: Any) -> None:
     Numbers, strings, booleans and tuples of them are converted with :func:`convert`
     against the field's type and range metadata, so a spec built in Python fails with
     the same message as a file (its file reads ``<memory>``, its key is the field's
-    name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``. Nested
-    dataclasses validate themselves. Call it first in ``__post_init__``.
+    name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``, one with
+    :func:`unlimited` metadata may also be ``math.inf``. Nested dataclasses validate
+    themselves. Call it first in ``__post_init__``.
 
     Examples
     --------
@@ -483,13 +512,17 @@ def check_fields(obj: Any) -> None:
     >>> Wheel(radius=np.float32(0.5)).radius
     0.5
     """
-    for name, hint, valid, path_like, or_object_ in _checked_fields(type(obj)):
-        if getattr(obj, name) is None and type(None) in typing.get_args(hint):
+    for name, hint, metadata in _checked_fields(type(obj)):
+        given = getattr(obj, name)
+        if given is None and type(None) in typing.get_args(hint):
             continue
-        if or_object_ and not isinstance(getattr(obj, name), str | int | float | bool):
+        if metadata.get("or_object") and not isinstance(given, str | int | float | bool):
             continue
-        value = convert(hint, _as_toml(getattr(obj, name)), file=MEMORY, key=name, valid=valid)
-        if path_like and not SAFE_NAME.fullmatch(value):
+        if metadata.get("unlimited") and isinstance(given, float) and given == math.inf:
+            object.__setattr__(obj, name, math.inf)
+            continue
+        value = convert(hint, _as_toml(given), file=MEMORY, key=name, valid=metadata.get("range"))
+        if metadata.get("safe_name") and not SAFE_NAME.fullmatch(value):
             raise SpecError(
                 MEMORY, name,
                 f"{value!r} is not a usable name: use 1-64 letters, digits, '_', '-' or '.', "
