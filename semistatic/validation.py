@@ -1,8 +1,9 @@
 """Turn TOML tables into frozen dataclasses, or say exactly which key is wrong and why.
 
-This layer is generic: nothing here knows about worlds. It reads a TOML file with
-``tomllib`` (never ``eval``), and :func:`from_table` builds any frozen dataclass from a
-table, driven by the dataclass's own field types:
+This layer is generic: nothing here knows about worlds, robots or scenarios, which all
+use it. It reads a TOML file with ``tomllib`` (never ``eval``), :func:`from_table` builds
+any frozen dataclass from a table and :func:`check_fields` validates one built in code,
+both driven by the dataclass's own field types:
 
 - ``float``, ``int``, ``str``, ``bool``: checked strictly (``true`` is not a number,
   ``1.5`` is not an int, an int is accepted for a float; ``nan``/``inf`` are rejected);
