@@ -157,7 +157,8 @@ def unlimited() -> dict[str, bool]:
     """Return field metadata for a limit that code may switch off with ``math.inf``.
 
     Combine it with :func:`bounds`: ``metadata={**bounds(gt=0.0, le=20.0), **unlimited()}``.
-    Only ``+inf`` passes unchecked; any finite value must satisfy the bounds.
+    Only ``+inf`` passes unchecked, and only in :func:`check_fields` (a file's ``inf``
+    is still rejected); any finite value must satisfy the bounds.
 
     Examples
     --------
