@@ -66,7 +66,9 @@ from robots.landmarks import (
     pairs_inside_gate,
 )
 from robots.triangulation import DEFAULT_MIN_RELIABILITY, TriangulationError, triangulate
+from semistatic.errors import MEMORY, SpecError
 from semistatic.frames import wrap_angle
+from semistatic.validation import bounds, check_fields
 
 __all__ = ["EKFLocalizer", "EKFParams", "EKFRecord"]
 
@@ -137,67 +139,77 @@ class EKFParams:
     --------
     >>> EKFParams().increment_covariance([0.5, 0.0, 0.0]).diagonal().round(6)
     array([2.0e-04, 2.0e-04, 5.1e-05])
-    >>> EKFParams(outage_timeout=0.0)  # doctest: +ELLIPSIS
+    >>> EKFParams(outage_timeout=0.0)
     Traceback (most recent call last):
     ...
-    ValueError: EKFParams.outage_timeout must be > 0 s (got 0.0)...
+    semistatic.errors.SpecError: <memory>: outage_timeout: must be > 0.0 and <= 3600.0, \
+got 0.0 (seconds without landmarks before re-localising, e.g. 5)
     >>> EKFParams(range_bias_walk=1e-4)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: EKFParams.range_bias_walk = 0.0001 needs the bias state: set range_bias_sigma...
+    semistatic.errors.SpecError: <memory>: range_bias_walk: 0.0001 needs the bias state: set \
+range_bias_sigma...
     """
 
-    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    translation_sigma: float = 0.02
-    rotation_sigma: float = 0.02
-    rotation_per_distance_sigma: float = 0.01
-    min_increment_sigma: float = 1e-4
-    nis_gate: float = CHI2_2DOF_99
-    outage_timeout: float = 5.0
-    max_position_sigma: float = 0.5
-    min_reliability: float = DEFAULT_MIN_RELIABILITY
-    relocalization_tolerance: float = 0.1
+    # Noise figures are bounded by what odometry and lasers of real vehicles show (a few
+    # per cent); the upper bounds leave room for a hundred times worse.
+    mount: tuple[float, float, float] = field(
+        default=(0.0, 0.0, 0.0),
+        metadata=bounds(ge=-20.0, le=20.0, fix="(x, y, yaw) in base_link: LaserMount.pose2d()"),
+    )
+    translation_sigma: float = field(
+        default=0.02, metadata=bounds(ge=0.0, le=1.0, fix="metres per square-root metre")
+    )
+    rotation_sigma: float = field(
+        default=0.02, metadata=bounds(ge=0.0, le=1.0, fix="radians per square-root radian")
+    )
+    rotation_per_distance_sigma: float = field(
+        default=0.01, metadata=bounds(ge=0.0, le=1.0, fix="radians per square-root metre")
+    )
+    min_increment_sigma: float = field(
+        default=1e-4,
+        metadata=bounds(gt=0.0, le=0.1, fix="a small odometry noise floor such as 1e-4"),
+    )
+    nis_gate: float = field(
+        default=CHI2_2DOF_99,
+        metadata=bounds(
+            gt=0.0, le=100.0, fix="a chi-square quantile, e.g. 9.21 for 99% with 2 dof"
+        ),
+    )
+    outage_timeout: float = field(
+        default=5.0,
+        metadata=bounds(
+            gt=0.0, le=3600.0, fix="seconds without landmarks before re-localising, e.g. 5"
+        ),
+    )
+    max_position_sigma: float = field(
+        default=0.5, metadata=bounds(gt=0.0, le=100.0, fix="metres, e.g. 0.5")
+    )
+    min_reliability: float = field(
+        default=DEFAULT_MIN_RELIABILITY,
+        metadata=bounds(ge=0.0, le=1.0, fix="ToTal's |D| / s^2, dimensionless, e.g. 1e-6"),
+    )
+    relocalization_tolerance: float = field(
+        default=0.1, metadata=bounds(gt=0.0, le=10.0, fix="metres, e.g. 0.1")
+    )
     record_history: bool = True
-    range_bias_sigma: float = 0.0
-    range_bias_walk: float = 0.0
+    range_bias_sigma: float = field(
+        default=0.0,
+        metadata=bounds(ge=0.0, le=1.0, fix="metres, e.g. 0.0173 for an LMS100; 0 for no bias"),
+    )
+    range_bias_walk: float = field(
+        default=0.0, metadata=bounds(ge=0.0, le=1.0, fix="m per square-root second")
+    )
 
     def __post_init__(self) -> None:
-        mount = tuple(float(v) for v in self.mount)
-        if len(mount) != 3 or not all(math.isfinite(v) for v in mount):
-            raise ValueError(
-                f"EKFParams.mount must be three finite numbers (x, y, yaw), got {self.mount}"
-            )
-        object.__setattr__(self, "mount", mount)
-        non_negative = (
-            "translation_sigma",
-            "rotation_sigma",
-            "rotation_per_distance_sigma",
-            "range_bias_sigma",
-            "range_bias_walk",
-        )
-        for name in non_negative:
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"EKFParams.{name} must be finite and >= 0, got {value}")
+        check_fields(self)
         if self.range_bias_walk > 0.0 and self.range_bias_sigma == 0.0:
-            raise ValueError(
-                f"EKFParams.range_bias_walk = {self.range_bias_walk} needs the bias state: "
-                "set range_bias_sigma > 0 (e.g. 0.0173 m for an LMS100) or the walk to 0"
+            raise SpecError(
+                MEMORY,
+                "range_bias_walk",
+                f"{self.range_bias_walk} needs the bias state: set range_bias_sigma > 0 "
+                "(e.g. 0.0173 m for an LMS100) or the walk to 0",
             )
-        positive = {
-            "min_increment_sigma": "a small odometry noise floor such as 1e-4",
-            "nis_gate": "a chi-square quantile, e.g. 9.21 for 99% with 2 dof",
-            "outage_timeout": "seconds without landmarks before re-localising, e.g. 5",
-            "max_position_sigma": "metres, e.g. 0.5",
-            "relocalization_tolerance": "metres, e.g. 0.1",
-        }
-        for name, hint in positive.items():
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                unit = " s" if name == "outage_timeout" else ""
-                raise ValueError(f"EKFParams.{name} must be > 0{unit} (got {value}): {hint}")
-        if not self.min_reliability >= 0.0:
-            raise ValueError(f"EKFParams.min_reliability must be >= 0, got {self.min_reliability}")
 
     def increment_covariance(self, increment: ArrayLike) -> np.ndarray:
         """Return the default ``(3, 3)`` covariance of an odometry increment.

@@ -61,19 +61,29 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from robots.path import SplinePath
 from semistatic.frames import wrap_angle
+from semistatic.validation import bounds, check_fields, unlimited
 
 __all__ = ["ChainedFormFollower", "FollowerParams"]
 
 # Heading errors beyond this (rad) are clipped before tan(): tan(pi/2) is infinite and
 # beyond it the sign flips, which would steer away from the path.
 MAX_HEADING_ERROR = math.radians(80.0)
+
+
+def _limit(default: float, *, le: float, unit: str) -> Any:
+    """Return a limit field: ``> 0`` and at most ``le``, or ``math.inf`` to switch it off."""
+    return field(
+        default=default,
+        metadata={**bounds(gt=0.0, le=le, fix=f"{unit}; math.inf disables it"), **unlimited()},
+    )
 
 
 @dataclass(frozen=True)
@@ -111,43 +121,40 @@ class FollowerParams:
     >>> FollowerParams(k2=-1.0)
     Traceback (most recent call last):
     ...
-    ValueError: FollowerParams: k2 must be > 0 (1/m^2, lateral-error gain; paper uses 1.5), got -1.0
+    semistatic.errors.SpecError: <memory>: k2: must be > 0.0 and <= 100.0, got -1.0 \
+(1/m^2, lateral-error gain; paper uses 1.5)
+    >>> FollowerParams(max_speed=math.inf).max_speed
+    inf
     """
 
-    speed: float = 0.4
-    k1: float = 3.0
-    k2: float = 1.5
-    k3: float = 1.5
-    max_speed: float = 1.0
-    max_angular_speed: float = 1.5
-    max_acceleration: float = 0.5
-    max_deceleration: float = 1.0
-    max_angular_acceleration: float = 3.0
-    goal_tolerance: float = 0.05
-    projection_window: float = 1.0
+    # Bounds cover wheeled vehicles up to road speed (20 m/s); a limit of math.inf is off.
+    speed: float = field(
+        default=0.4, metadata=bounds(gt=0.0, le=20.0, fix="m/s, nominal forward speed")
+    )
+    k1: float = field(
+        default=3.0, metadata=bounds(gt=0.0, le=100.0, fix="1/m, along-track gain; paper uses 3")
+    )
+    k2: float = field(
+        default=1.5,
+        metadata=bounds(gt=0.0, le=100.0, fix="1/m^2, lateral-error gain; paper uses 1.5"),
+    )
+    k3: float = field(
+        default=1.5,
+        metadata=bounds(gt=0.0, le=100.0, fix="1/m, heading-error gain; paper uses 1.5"),
+    )
+    max_speed: float = _limit(1.0, le=20.0, unit="m/s")
+    max_angular_speed: float = _limit(1.5, le=20.0, unit="rad/s")
+    max_acceleration: float = _limit(0.5, le=20.0, unit="m/s^2")
+    max_deceleration: float = _limit(1.0, le=20.0, unit="m/s^2")
+    max_angular_acceleration: float = _limit(3.0, le=100.0, unit="rad/s^2")
+    goal_tolerance: float = field(default=0.05, metadata=bounds(gt=0.0, le=10.0, fix="m"))
+    projection_window: float = field(
+        default=1.0,
+        metadata=bounds(gt=0.0, le=100.0, fix="m, exceed the distance of one control tick"),
+    )
 
     def __post_init__(self) -> None:
-        hints = {
-            "speed": "m/s, nominal forward speed",
-            "k1": "1/m, along-track gain; paper uses 3",
-            "k2": "1/m^2, lateral-error gain; paper uses 1.5",
-            "k3": "1/m, heading-error gain; paper uses 1.5",
-            "max_speed": "m/s; math.inf disables it",
-            "max_angular_speed": "rad/s; math.inf disables it",
-            "max_acceleration": "m/s^2; math.inf disables it",
-            "max_deceleration": "m/s^2; math.inf disables it",
-            "max_angular_acceleration": "rad/s^2; math.inf disables it",
-            "goal_tolerance": "m",
-            "projection_window": "m, exceed the distance of one control tick",
-        }
-        for name, hint in hints.items():
-            value = float(getattr(self, name))
-            object.__setattr__(self, name, value)
-            if not value > 0.0 or math.isnan(value):
-                raise ValueError(f"FollowerParams: {name} must be > 0 ({hint}), got {value}")
-        for name in ("speed", "k1", "k2", "k3", "goal_tolerance", "projection_window"):
-            if math.isinf(getattr(self, name)):
-                raise ValueError(f"FollowerParams: {name} must be finite, got inf")
+        check_fields(self)
 
 
 class ChainedFormFollower:

@@ -20,9 +20,12 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from semistatic.errors import MEMORY, SpecError
+from semistatic.validation import bounds, check_fields
 
 __all__ = [
     "LMS100",
@@ -39,6 +42,10 @@ POST_INTENSITY_THRESHOLD = 0.7
 # Slack when counting how many whole angular steps fit in the field of view, so that
 # 270 deg / 0.5 deg gives 540 steps despite floating-point rounding.
 _BEAM_COUNT_SLACK = 1e-9
+
+MAX_RANGE_SIGMA = 10.0
+"""Largest range noise (m): a data-sheet figure (<= 0.03 m) times a scenario's noise factor
+(up to 100)."""
 
 
 @dataclass(frozen=True)
@@ -76,50 +83,51 @@ class LaserSpec:
     3
     >>> spec.angles().round(4)
     array([-0.7854,  0.    ,  0.7854])
+    >>> LaserSpec(**{**vars(spec), "fov": 270.0})  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: fov: must be > 0.0 and <= 6.28..., got 270.0 \
+(radians: math.radians(270) for a 270 deg scanner)
     """
 
+    # Bounds span real 2D scanners (safety scanners to 100 m+ surveying-grade lidars).
     name: str
-    fov: float
-    angular_resolution: float
-    rate_hz: float
-    range_min: float
-    range_max: float
-    range_sigma: float
-    range_bias_max: float
-    intensity_sigma: float
-    dropout_prob: float
+    fov: float = field(
+        metadata=bounds(
+            gt=0.0, le=2.0 * math.pi, fix="radians: math.radians(270) for a 270 deg scanner"
+        )
+    )
+    angular_resolution: float = field(
+        metadata=bounds(ge=math.radians(0.01), le=math.radians(45.0),
+                        fix="radians: math.radians(0.5) for 0.5 deg")
+    )
+    rate_hz: float = field(metadata=bounds(gt=0.0, le=200.0, fix="scans per second, e.g. 25"))
+    range_min: float = field(metadata=bounds(ge=0.0, le=10.0, fix="metres, e.g. 0.05"))
+    range_max: float = field(metadata=bounds(gt=0.0, le=500.0, fix="metres, e.g. 20"))
+    range_sigma: float = field(
+        metadata=bounds(ge=0.0, le=MAX_RANGE_SIGMA, fix="metres, 1-sigma, e.g. 0.012")
+    )
+    range_bias_max: float = field(metadata=bounds(ge=0.0, le=1.0, fix="metres, e.g. 0.03"))
+    intensity_sigma: float = field(
+        metadata=bounds(ge=0.0, le=1.0, fix="on the [0, 1] remission scale, e.g. 0.02")
+    )
+    dropout_prob: float = field(metadata=bounds(ge=0.0, lt=1.0, fix="a probability, e.g. 0"))
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if not self.name:
-            raise ValueError("LaserSpec: name must be a non-empty string")
-        if not 0.0 < self.fov <= 2.0 * math.pi:
-            raise ValueError(
-                f"LaserSpec {self.name!r}: fov must be in (0, 2*pi] rad, got {self.fov}; "
-                "pass radians (math.radians(270) for a 270 deg scanner)"
+            raise SpecError(MEMORY, "name", "must be a non-empty string, e.g. 'Sick LMS100'")
+        if self.angular_resolution > self.fov:
+            raise SpecError(
+                MEMORY,
+                "angular_resolution",
+                f"must not exceed fov ({self.fov} rad), got {self.angular_resolution}",
             )
-        if not 0.0 < self.angular_resolution <= self.fov:
-            raise ValueError(
-                f"LaserSpec {self.name!r}: angular_resolution must be in (0, fov], "
-                f"got {self.angular_resolution} rad with fov={self.fov} rad"
-            )
-        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0.0):
-            raise ValueError(
-                f"LaserSpec {self.name!r}: rate_hz must be a positive number, got {self.rate_hz}"
-            )
-        if not (0.0 <= self.range_min < self.range_max and math.isfinite(self.range_max)):
-            raise ValueError(
-                f"LaserSpec {self.name!r}: need 0 <= range_min < range_max < inf, "
-                f"got range_min={self.range_min}, range_max={self.range_max}"
-            )
-        for field_name in ("range_sigma", "range_bias_max", "intensity_sigma"):
-            value = getattr(self, field_name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(
-                    f"LaserSpec {self.name!r}: {field_name} must be finite and >= 0, got {value}"
-                )
-        if not 0.0 <= self.dropout_prob < 1.0:
-            raise ValueError(
-                f"LaserSpec {self.name!r}: dropout_prob must be in [0, 1), got {self.dropout_prob}"
+        if self.range_min >= self.range_max:
+            raise SpecError(
+                MEMORY,
+                "range_min",
+                f"must be < range_max ({self.range_max} m), got {self.range_min}",
             )
 
     @property

@@ -34,13 +34,15 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from robots.lasers import LMS100, S300, LaserSpec
+from semistatic.errors import MEMORY, SpecError
+from semistatic.validation import bounds, check_fields
 
 __all__ = [
     "LGV",
@@ -53,15 +55,14 @@ __all__ = [
 
 Point = tuple[float, float]
 
+# Bounds a real wheeled vehicle respects, from a 2 kg lab robot to a 50 t heavy-load AGV.
+MAX_VEHICLE_EXTENT = 20.0
+"""Largest distance (m) of any body part, caster, mount or footprint vertex from the axle
+midpoint: the longest automated guided vehicles are about 15 m long."""
 
-def _require_positive(owner: str, name: str, value: float) -> None:
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{owner}.{name} must be a finite number > 0 (got {value})")
-
-
-def _require_finite(owner: str, name: str, value: float) -> None:
-    if not math.isfinite(value):
-        raise ValueError(f"{owner}.{name} must be a finite number (got {value})")
+_IN_VEHICLE = bounds(
+    ge=-MAX_VEHICLE_EXTENT, le=MAX_VEHICLE_EXTENT, fix="metres in base_link, x forward, y left"
+)
 
 
 def _polygon_signed_area(vertices: np.ndarray) -> float:
@@ -90,33 +91,30 @@ class LaserMount:
     >>> mount = LaserMount(LMS100, x=0.1, y=0.0, z=0.3)
     >>> mount.pose2d()
     array([0.1, 0. , 0. ])
-    >>> LaserMount(LMS100, x=0.1, y=0.0, z=-0.3)  # doctest: +ELLIPSIS
+    >>> LaserMount(LMS100, x=0.1, y=0.0, z=-0.3)
     Traceback (most recent call last):
     ...
-    ValueError: LaserMount.z must be a finite number > 0 ...
+    semistatic.errors.SpecError: <memory>: z: must be > 0.0 and <= 10.0, got -0.3 \
+(metres: height of the scan plane above the floor)
     """
 
     laser: LaserSpec
-    x: float
-    y: float
-    z: float
-    yaw: float = 0.0
+    x: float = field(metadata=_IN_VEHICLE)
+    y: float = field(metadata=_IN_VEHICLE)
+    z: float = field(
+        metadata=bounds(gt=0.0, le=10.0, fix="metres: height of the scan plane above the floor")
+    )
+    yaw: float = field(
+        default=0.0,
+        metadata=bounds(gt=-math.pi, le=math.pi, fix="wrap it with semistatic.frames.wrap_angle"),
+    )
 
     def __post_init__(self) -> None:
         if not isinstance(self.laser, LaserSpec):
             raise TypeError(
                 f"LaserMount.laser must be a robots.lasers.LaserSpec, got {type(self.laser)}"
             )
-        for name in ("x", "y", "yaw"):
-            _require_finite("LaserMount", name, getattr(self, name))
-            object.__setattr__(self, name, float(getattr(self, name)))
-        _require_positive("LaserMount", "z", self.z)
-        object.__setattr__(self, "z", float(self.z))
-        if not -math.pi < self.yaw <= math.pi:
-            raise ValueError(
-                f"LaserMount.yaw must be in (-pi, pi] rad (got {self.yaw}); "
-                "wrap it with semistatic.frames.wrap_angle"
-            )
+        check_fields(self)
 
     def pose2d(self) -> np.ndarray:
         """Return the planar mount pose ``(x, y, yaw)`` in ``base_link``.
@@ -183,131 +181,105 @@ class UGVSpec:
     >>> spec = PIONEER3DX
     >>> round(spec.total_mass, 2), round(spec.max_omega, 2)
     (9.0, 7.27)
-    >>> PIONEER3DX.replace(wheel_radius=0.0)  # doctest: +ELLIPSIS
+    >>> PIONEER3DX.replace(wheel_radius=0.0)
     Traceback (most recent call last):
     ...
-    ValueError: UGVSpec.wheel_radius must be a finite number > 0 (got 0.0)
+    semistatic.errors.SpecError: <memory>: wheel_radius: must be > 0.0 and <= 2.0, got 0.0 \
+(metres, tyre radius, e.g. 0.0975)
     """
 
     name: str
-    body_length: float
-    body_width: float
-    body_height: float
-    ground_clearance: float
-    body_x_offset: float
-    body_mass: float
-    wheel_radius: float
-    wheel_separation: float
-    wheel_width: float
-    wheel_mass: float
-    max_wheel_torque: float
-    max_wheel_speed: float
-    caster_radius: float
-    caster_mass: float
-    caster_positions: tuple[Point, ...]
-    encoder_ticks_per_rev: int
-    encoder_slip_sigma: float
+    body_length: float = field(metadata=bounds(gt=0.0, le=MAX_VEHICLE_EXTENT, fix="metres"))
+    body_width: float = field(metadata=bounds(gt=0.0, le=MAX_VEHICLE_EXTENT, fix="metres"))
+    body_height: float = field(
+        metadata=bounds(gt=0.0, le=5.0, fix="metres: height of the body top above the floor")
+    )
+    ground_clearance: float = field(metadata=bounds(ge=0.0, le=5.0, fix="metres"))
+    body_x_offset: float = field(metadata=_IN_VEHICLE)
+    body_mass: float = field(metadata=bounds(gt=0.0, le=50000.0, fix="kg"))
+    wheel_radius: float = field(
+        metadata=bounds(gt=0.0, le=2.0, fix="metres, tyre radius, e.g. 0.0975")
+    )
+    wheel_separation: float = field(
+        metadata=bounds(gt=0.0, le=MAX_VEHICLE_EXTENT, fix="metres between wheel mid-planes")
+    )
+    wheel_width: float = field(metadata=bounds(gt=0.0, le=1.0, fix="metres"))
+    wheel_mass: float = field(metadata=bounds(gt=0.0, le=2000.0, fix="kg"))
+    max_wheel_torque: float = field(
+        metadata=bounds(gt=0.0, le=100000.0, fix="N m at the wheel, after the gearbox")
+    )
+    max_wheel_speed: float = field(
+        metadata=bounds(gt=0.0, le=500.0, fix="rad/s: top speed / wheel_radius")
+    )
+    caster_radius: float = field(metadata=bounds(gt=0.0, le=1.0, fix="metres"))
+    caster_mass: float = field(metadata=bounds(gt=0.0, le=500.0, fix="kg"))
+    caster_positions: tuple[Point, ...] = field(metadata=_IN_VEHICLE)
+    encoder_ticks_per_rev: int = field(
+        metadata=bounds(ge=1, le=2**31 - 1, fix="counts per wheel revolution")
+    )
+    encoder_slip_sigma: float = field(
+        metadata=bounds(
+            ge=0.0, le=1.0, fix="relative 1-sigma error over 1 m; 0 for quantised-only odometry"
+        )
+    )
     safety_laser: LaserMount
     localization_laser: LaserMount
-    footprint: tuple[Point, ...]
+    footprint: tuple[Point, ...] = field(metadata=_IN_VEHICLE)
 
     def __post_init__(self) -> None:
-        owner = "UGVSpec"
+        check_fields(self)
         if not self.name or self.name != self.name.lower():
-            raise ValueError(
-                f"{owner}.name must be a non-empty lower-case string, got {self.name!r}"
+            raise SpecError(
+                MEMORY, "name", f"must be a non-empty lower-case string, got {self.name!r}"
             )
-        for name in (
-            "body_length",
-            "body_width",
-            "body_height",
-            "body_mass",
-            "wheel_radius",
-            "wheel_separation",
-            "wheel_width",
-            "wheel_mass",
-            "max_wheel_torque",
-            "max_wheel_speed",
-            "caster_radius",
-            "caster_mass",
-        ):
-            _require_positive(owner, name, getattr(self, name))
-            object.__setattr__(self, name, float(getattr(self, name)))
-        for name in ("ground_clearance", "body_x_offset", "encoder_slip_sigma"):
-            _require_finite(owner, name, getattr(self, name))
-            object.__setattr__(self, name, float(getattr(self, name)))
-        if not 0.0 <= self.ground_clearance < self.body_height:
-            raise ValueError(
-                f"{owner}.ground_clearance must be in [0, body_height={self.body_height}) "
-                f"(got {self.ground_clearance}): body_height is the height of the body top "
-                "above the floor, not the box height"
+        if self.ground_clearance >= self.body_height:
+            raise SpecError(
+                MEMORY,
+                "ground_clearance",
+                f"must be < body_height ({self.body_height} m), got {self.ground_clearance}: "
+                "body_height is the height of the body top above the floor, not the box height",
             )
-        if self.encoder_slip_sigma < 0.0:
-            raise ValueError(
-                f"{owner}.encoder_slip_sigma must be >= 0 (got {self.encoder_slip_sigma}); "
-                "use 0 for noise-free (quantised only) odometry"
-            )
-        if isinstance(self.encoder_ticks_per_rev, bool) or not isinstance(
-            self.encoder_ticks_per_rev, int | np.integer
-        ):
-            raise TypeError(
-                f"{owner}.encoder_ticks_per_rev must be an int (counts per wheel revolution), "
-                f"got {self.encoder_ticks_per_rev!r}"
-            )
-        if self.encoder_ticks_per_rev <= 0:
-            raise ValueError(
-                f"{owner}.encoder_ticks_per_rev must be > 0 (got {self.encoder_ticks_per_rev})"
-            )
-        object.__setattr__(self, "encoder_ticks_per_rev", int(self.encoder_ticks_per_rev))
         if self.wheel_separation <= self.wheel_width:
-            raise ValueError(
-                f"{owner}.wheel_separation ({self.wheel_separation}) must exceed wheel_width "
-                f"({self.wheel_width}): the track is measured between the wheel mid-planes"
+            raise SpecError(
+                MEMORY,
+                "wheel_separation",
+                f"must exceed wheel_width ({self.wheel_width} m), got {self.wheel_separation}: "
+                "the track is measured between the wheel mid-planes",
             )
         for name in ("safety_laser", "localization_laser"):
             if not isinstance(getattr(self, name), LaserMount):
-                raise TypeError(f"{owner}.{name} must be a LaserMount")
-        self._validate_casters(owner)
-        self._validate_footprint(owner)
+                raise TypeError(f"UGVSpec.{name} must be a LaserMount")
+        self._validate_casters()
+        self._validate_footprint()
 
-    def _validate_casters(self, owner: str) -> None:
-        casters = np.asarray(self.caster_positions, dtype=float)
-        if casters.ndim != 2 or casters.shape[1] != 2 or len(casters) == 0:
-            raise ValueError(
-                f"{owner}.caster_positions must be a non-empty sequence of (x, y) pairs, "
-                f"got {self.caster_positions!r}"
-            )
-        if not np.isfinite(casters).all():
-            raise ValueError(f"{owner}.caster_positions must be finite")
-        object.__setattr__(
-            self, "caster_positions", tuple((float(x), float(y)) for x, y in casters)
-        )
+    def _validate_casters(self) -> None:
+        if not self.caster_positions:
+            raise SpecError(MEMORY, "caster_positions", "needs at least one (x, y) caster")
         # The wheels touch the floor on the axle line (x = 0); a body carried by them and
         # the casters is statically stable only if the centre of mass lies strictly
         # between the axle and the farthest casters on each side it leans to.
         com_x = self.centre_of_mass_x
-        xs = np.append(casters[:, 0], 0.0)
-        if not xs.min() < com_x < xs.max():
-            raise ValueError(
-                f"{owner}.caster_positions: the centre of mass (x={com_x:.3f} m) must lie "
-                f"strictly between the axle (x=0) and the casters (x={casters[:, 0].tolist()}); "
-                "move a caster past it or change body_x_offset"
+        caster_xs = [x for x, _ in self.caster_positions]
+        if not min(*caster_xs, 0.0) < com_x < max(*caster_xs, 0.0):
+            raise SpecError(
+                MEMORY,
+                "caster_positions",
+                f"the centre of mass (x={com_x:.3f} m) must lie strictly between the axle "
+                f"(x=0) and the casters (x={caster_xs}); move a caster past it or change "
+                "body_x_offset",
             )
 
-    def _validate_footprint(self, owner: str) -> None:
-        polygon = np.asarray(self.footprint, dtype=float)
-        if polygon.ndim != 2 or polygon.shape[1] != 2 or len(polygon) < 3:
-            raise ValueError(
-                f"{owner}.footprint must have at least 3 (x, y) vertices, got {self.footprint!r}"
+    def _validate_footprint(self) -> None:
+        if len(self.footprint) < 3:
+            raise SpecError(
+                MEMORY, "footprint", f"needs at least 3 (x, y) vertices, got {len(self.footprint)}"
             )
-        if not np.isfinite(polygon).all():
-            raise ValueError(f"{owner}.footprint must be finite")
-        if _polygon_signed_area(polygon) <= 0.0:
-            raise ValueError(
-                f"{owner}.footprint must be counter-clockwise with non-zero area; "
-                "reverse the vertex order"
+        if _polygon_signed_area(np.asarray(self.footprint)) <= 0.0:
+            raise SpecError(
+                MEMORY,
+                "footprint",
+                "must be counter-clockwise with non-zero area; reverse the vertex order",
             )
-        object.__setattr__(self, "footprint", tuple((float(x), float(y)) for x, y in polygon))
 
     @property
     def total_mass(self) -> float:

@@ -21,8 +21,8 @@ from scenarios.output_dir import check_output_dir, stage_and_publish
 from scenarios.progress import count_progress, scan_progress, sim_progress
 from scenarios.tune import add_parser as add_tune_parser
 from scenarios.tune import main_tune
-from worlds.errors import SpecError
-from worlds.validation import Range, as_float, as_int
+from semistatic.errors import SpecError
+from semistatic.validation import Range, as_float, as_int
 
 __all__ = ["main"]
 

@@ -8,7 +8,7 @@ every resulting layout is still a testbench (:func:`worlds.checks.layout_problem
 box moved into a protective field would stop the robot for good, one moved out of every
 warning field would never be detected.
 
-Every error is a :class:`~worlds.errors.SpecError` naming the scenario file and the key
+Every error is a :class:`~semistatic.errors.SpecError` naming the scenario file and the key
 to fix (``moves[2].box``, ``people[0]``, ``world``, ``robot``).
 
 Examples
@@ -24,7 +24,7 @@ Examples
 >>> world_for_lap(world, [BoxMove(lap=2, action="remove", box="carton_nort")], lap=2)
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: <memory>: moves[0].box: no box named 'carton_nort' in world 'sim1' \
+semistatic.errors.SpecError: <memory>: moves[0].box: no box named 'carton_nort' in world 'sim1' \
 before lap 2 (did you mean 'carton_north'?); boxes then: carton_aisle, pallet_turn, carton_north
 """
 
@@ -37,11 +37,11 @@ import numpy as np
 
 from robots.presets import PRESETS, UGVSpec, get_preset
 from scenarios.spec import BoxMove, ScenarioSpec
+from semistatic.errors import MEMORY, SpecError
+from semistatic.validation import FILE_KEY, did_you_mean
 from worlds.checks import Clearances, LayoutProblem, layout_problems
-from worlds.errors import MEMORY, SpecError
 from worlds.load import load_world
 from worlds.spec import BoxSpec, WorldSpec
-from worlds.validation import FILE_KEY, did_you_mean
 
 __all__ = [
     "check_first_lap",
@@ -132,7 +132,7 @@ def world_for_lap(
     >>> world_for_lap(world, [add], lap=2)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: moves[0].box: a box named 'carton_west' already ...
+    semistatic.errors.SpecError: <memory>: moves[0].box: a box named 'carton_west' already ...
     """
     if isinstance(lap, bool) or not isinstance(lap, int | np.integer) or lap < 1:
         raise ValueError(f"world_for_lap: lap counts from 1, got {lap!r}")
@@ -156,7 +156,7 @@ def enable_people(world: WorldSpec, people: Sequence[str], *, file: str = MEMORY
     >>> enable_people(load_world("pal3"), ["waker"], file="s.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: s.toml: people[0]: world 'pal3' has no person named 'waker' \
+    semistatic.errors.SpecError: s.toml: people[0]: world 'pal3' has no person named 'waker' \
 (did you mean 'walker'?); people: walker
     """
     known = [person.name for person in world.people]
@@ -229,7 +229,7 @@ def robot_preset(robot: str | UGVSpec, *, file: str = MEMORY) -> UGVSpec:
     >>> robot_preset("pioner3dx", file="s.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: s.toml: robot: unknown robot preset 'pioner3dx' \
+    semistatic.errors.SpecError: s.toml: robot: unknown robot preset 'pioner3dx' \
 (did you mean 'pioneer3dx'?); presets: lgv, pioneer3dx
     """
     if isinstance(robot, UGVSpec):
@@ -313,7 +313,7 @@ def check_first_lap(
     >>> check_first_lap(few_posts, footprint=PIONEER_FOOTPRINT)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: ...sim1.toml: posts: lap 1: path: ... pose(s) see fewer than 3 posts...
+    semistatic.errors.SpecError: ...sim1.toml: posts: lap 1: path: ... pose(s) see fewer than 3...
     """
     problems = layout_problems(world, footprint=footprint, clearances=clearances)
     problems.sort(key=lambda problem: FIRST_LAP_ORDER.index(problem.check))
@@ -345,7 +345,7 @@ def check_moves(
     >>> check_moves(load_world("sim1"), [onto_path], footprint=PIONEER_FOOTPRINT, file="s.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: s.toml: moves[0]: before lap 2: box 'carton_aisle': overlaps a \
+    semistatic.errors.SpecError: s.toml: moves[0]: before lap 2: box 'carton_aisle': overlaps a \
 protective field (needs a gap of >= 0.05 m); and 1 more problem(s)
     """
     if not moves:
@@ -385,7 +385,7 @@ def check_scenario_layout(
     >>> check_scenario_layout(dataclasses.replace(spec, world="pal2"))  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
+    semistatic.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
 and no such file; bundled worlds: pal1, pal3, sim1, sim2
     """
     footprint = robot_footprint(spec.robot, file=spec.source)

@@ -8,7 +8,7 @@ Examples
 >>> load_scenario("sim1", overrides=["mapper.gte=0.15"])
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: --set: mapper.gte: unknown key (did you mean 'gate'?)
+semistatic.errors.SpecError: --set: mapper.gte: unknown key (did you mean 'gate'?)
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ from typing import Any
 
 from scenarios.layout import check_scenario_layout
 from scenarios.spec import ScenarioSpec
+from semistatic.errors import SpecError, join_key
 from semistatic.params import MapperParams
-from worlds.errors import SpecError, join_key
-from worlds.validation import (
+from semistatic.validation import (
     FILE_KEY,
     Range,
     as_table,
@@ -94,7 +94,7 @@ def scenario_path(name_or_path: str | Path) -> Path:
     >>> scenario_path("sim3")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
+    semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
 and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2
     """
     text = str(name_or_path)
@@ -215,11 +215,11 @@ def mapper_from_table(
     >>> mapper_from_table({"gate": "abc"}, file="--set")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --set: mapper.gate: expected a number, got a string 'abc'
+    semistatic.errors.SpecError: --set: mapper.gate: expected a number, got a string 'abc'
     >>> mapper_from_table({"max_range": -1.0}, file="--max-range", key="")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0
+    semistatic.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0
     """
     table = as_table(value, file=file, key=key)
     keys = _known_keys(MapperParams)
@@ -260,7 +260,7 @@ def scenario_from_toml(
     >>> scenario_from_toml({"world": "sim1", "laps": 0}, file="s.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: s.toml: laps: must be >= 1 and <= 1000, got 0
+    semistatic.errors.SpecError: s.toml: laps: must be >= 1 and <= 1000, got 0
     """
     table = dict(as_table(table, file=file, key=""))
     table.setdefault("name", Path(file).stem)
@@ -308,7 +308,7 @@ def load_scenario(name_or_path: str | Path, *, overrides: Iterable[str] = ()) ->
     >>> load_scenario("pal3b", overrides=["laps=0"])
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --set: laps: must be >= 1 and <= 1000, got 0
+    semistatic.errors.SpecError: --set: laps: must be >= 1 and <= 1000, got 0
     """
     path = scenario_path(name_or_path)
     return scenario_from_toml(read_toml(path), file=str(path), overrides=list(overrides))

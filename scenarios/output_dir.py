@@ -23,7 +23,7 @@ Examples
 >>> check_output_dir(folder / "run" / "b.txt" / "deeper")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: --out: .../b.txt/deeper: cannot create it: .../b.txt is a file...
+semistatic.errors.SpecError: --out: .../b.txt/deeper: cannot create it: .../b.txt is a file...
 >>> shutil.rmtree(folder)
 """
 
@@ -36,7 +36,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-from worlds.errors import SpecError
+from semistatic.errors import SpecError
 
 __all__ = [
     "LEGACY_RESULT_FILES",
@@ -113,7 +113,7 @@ def check_writable_parent(path: Path, *, option: str) -> None:
     >>> check_writable_parent(Path("/proc/semistatic/x"), option="--bag")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --bag: /proc/semistatic/x: cannot create it in /proc: ...
+    semistatic.errors.SpecError: --bag: /proc/semistatic/x: cannot create it in /proc: ...
     """
     ancestor = path.parent.absolute()
     while not ancestor.exists() and ancestor != ancestor.parent:

@@ -39,8 +39,8 @@ from scenarios.spec import (
     ScenarioSpec,
 )
 from semistatic.params import MapperParams
+from semistatic.validation import SAFE_NAME
 from worlds.spec import BoxSpec, PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
-from worlds.validation import SAFE_NAME
 
 __all__ = ["SECTIONS", "field_rows", "render"]
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from semistatic.errors import MEMORY, SpecError
 from semistatic.params import MapperParams
-from worlds.errors import MEMORY, SpecError
+from semistatic.validation import bounds, check_fields, or_object, safe_name
 from worlds.spec import BOX_SIZE, COORDINATE
-from worlds.validation import bounds, check_fields, or_object, safe_name
 
 __all__ = [
     "BOX_ACTIONS",

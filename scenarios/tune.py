@@ -44,8 +44,8 @@ from scenarios.output_dir import check_output_dir
 from scenarios.progress import count_progress
 from scenarios.spec import ScenarioSpec
 from scenarios.workers import worker_pool
-from worlds.errors import SpecError
-from worlds.validation import did_you_mean, read_toml
+from semistatic.errors import SpecError
+from semistatic.validation import did_you_mean, read_toml
 
 __all__ = [
     "DEFAULT_SORT",
@@ -198,7 +198,7 @@ def parse_grid(text: str) -> tuple[str, tuple[Any, ...]]:
     >>> parse_grid("mapper.gate=0.1,0.10")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gate: value 0.1 appears twice; list each once
+    semistatic.errors.SpecError: --grid: mapper.gate: value 0.1 appears twice; list each once
     """
     key, sep, raw = text.partition("=")
     key = key.strip()
@@ -230,7 +230,7 @@ def parse_grids(texts: Iterable[str]) -> dict[str, tuple[Any, ...]]:
     >>> parse_grids(["mapper.gate=0.1", "mapper.gate=0.2"])
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gate: given twice; put all values in one \
+    semistatic.errors.SpecError: --grid: mapper.gate: given twice; put all values in one \
 --grid mapper.gate=V1,V2,...
     """
     grids: dict[str, tuple[Any, ...]] = {}
@@ -254,7 +254,7 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     >>> parse_seeds("0,x")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --seeds: seed: expected integers >= 0 like --seeds 0,1,2, got 'x'
+    semistatic.errors.SpecError: --seeds: seed: expected integers >= 0 like --seeds 0,1,2, got 'x'
     """
     seeds = []
     for item in text.split(","):
@@ -371,7 +371,7 @@ def sweep_points(
 
     Raises
     ------
-    worlds.errors.SpecError
+    semistatic.errors.SpecError
         An empty grid, a key given both in ``grids`` and ``overrides``, too many points,
         or any point's scenario not valid (unknown key with a suggestion, value out of
         range); the error names the option (``--grid``, ``--seeds``, ``--laps``, ``--set``).
@@ -384,11 +384,11 @@ def sweep_points(
     >>> sweep_points("pal1", {"mapper.gte": [0.1]})
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gte: unknown key (did you mean 'gate'?)
+    semistatic.errors.SpecError: --grid: mapper.gte: unknown key (did you mean 'gate'?)
     >>> sweep_points("pal1", {"mapper.gate": [0.1, -0.1]})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1
+    semistatic.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1
     """
     grids = {key: tuple(values) for key, values in grids.items()}
     for key, values in grids.items():
@@ -841,7 +841,7 @@ def main_tune(args: argparse.Namespace) -> int:
     """Run ``semistatic tune``: validate every point, run the sweep, write and rank.
 
     Returns 0 when every run finished, 1 when some raised (their rows say why). Bad
-    input raises :class:`~worlds.errors.SpecError` before anything runs or is written.
+    input raises :class:`~semistatic.errors.SpecError` before anything runs or is written.
 
     Examples
     --------
@@ -850,7 +850,7 @@ def main_tune(args: argparse.Namespace) -> int:
     >>> main_tune(parser.parse_args(["tune", "sim1", "--grid", "mapper.gate=0.1", "--jobs", "0"]))
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --jobs: jobs: must be >= 1, got 0
+    semistatic.errors.SpecError: --jobs: jobs: must be >= 1, got 0
     """
     if args.jobs < 1:
         raise SpecError("--jobs", "jobs", f"must be >= 1, got {args.jobs}")

@@ -21,11 +21,23 @@ def imported_modules(path: Path) -> set[str]:
     return names
 
 
-@pytest.mark.parametrize("package", PURE_PACKAGES)
-def test_pure_packages_do_not_import_pybullet_or_sim(package):
+def importers(package: str, modules: set[str]) -> dict[str, list[str]]:
+    """Return the files of ``package`` that import any of ``modules``, with those modules."""
     offenders = {
-        str(path.relative_to(ROOT)): sorted(imported_modules(path) & FORBIDDEN)
+        str(path.relative_to(ROOT)): sorted(imported_modules(path) & modules)
         for path in sorted((ROOT / package).rglob("*.py"))
     }
-    offenders = {name: mods for name, mods in offenders.items() if mods}
+    return {name: mods for name, mods in offenders.items() if mods}
+
+
+@pytest.mark.parametrize("package", PURE_PACKAGES)
+def test_pure_packages_do_not_import_pybullet_or_sim(package):
+    offenders = importers(package, FORBIDDEN)
     assert offenders == {}, f"only sim/ and scenarios/ may use PyBullet: {offenders}"
+
+
+def test_semistatic_is_the_lowest_package():
+    # robots and worlds import semistatic's types and spec validation; the reverse would
+    # make them import each other.
+    offenders = importers("semistatic", {"robots", "worlds"})
+    assert offenders == {}, f"semistatic must not import robots or worlds: {offenders}"

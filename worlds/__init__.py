@@ -9,8 +9,8 @@ True
 False
 """
 
+from semistatic.errors import SpecError
 from worlds.checks import Clearances, LayoutProblem, layout_problems
-from worlds.errors import SpecError
 from worlds.load import bundled_worlds, load_world
 from worlds.spec import (
     BoxSpec,

@@ -45,8 +45,8 @@ import shapely
 from numpy.typing import ArrayLike
 
 from robots.path import SplinePath
+from semistatic.errors import MEMORY, SpecError
 from semistatic.frames import transform_points, wrap_angle
-from worlds.errors import MEMORY, SpecError
 from worlds.spec import PathSpec, WorldSpec
 
 __all__ = [
@@ -121,7 +121,7 @@ class Clearances:
     >>> Clearances(protective=-0.05)
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: protective: must be a finite number > 0, got -0.05
+    semistatic.errors.SpecError: <memory>: protective: must be a finite number > 0, got -0.05
     """
 
     protective: float = 0.05

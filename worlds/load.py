@@ -4,7 +4,7 @@ The file mirrors :class:`~worlds.spec.WorldSpec`: top-level ``name`` (defaults t
 name), ``description``, arrays of tables ``walls``, ``posts``, ``boxes``, ``people`` and a
 ``path`` table with ``knots`` and an array of ``segments``. Every key is checked (type,
 range, unknown keys with a "did you mean"), then the dataclasses check the geometry.
-Any problem raises :class:`~worlds.errors.SpecError` naming the file and the key.
+Any problem raises :class:`~semistatic.errors.SpecError` naming the file and the key.
 
 Examples
 --------
@@ -14,7 +14,7 @@ Examples
 >>> load_world("sim_1")
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: sim_1: <file>: not a bundled world (did you mean 'sim1'?) \
+semistatic.errors.SpecError: sim_1: <file>: not a bundled world (did you mean 'sim1'?) \
 and no such file; bundled worlds: pal1, pal3, sim1, sim2
 """
 
@@ -22,9 +22,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from worlds.errors import SpecError
+from semistatic.errors import SpecError
+from semistatic.validation import FILE_KEY, as_table, did_you_mean, from_table, read_toml
 from worlds.spec import WorldSpec
-from worlds.validation import FILE_KEY, as_table, did_you_mean, from_table, read_toml
 
 __all__ = ["DATA_DIR", "bundled_worlds", "load_world", "world_from_toml", "world_path"]
 
@@ -83,7 +83,7 @@ def world_from_toml(table: dict, *, file: str) -> WorldSpec:
     >>> world_from_toml(table, file="w.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: w.toml: path.knots: needs at least 2 knots, got 1
+    semistatic.errors.SpecError: w.toml: path.knots: needs at least 2 knots, got 1
     """
     table = dict(as_table(table, file=file, key=""))
     table.setdefault("name", Path(file).stem)

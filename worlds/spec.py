@@ -10,7 +10,7 @@ Points are ``(x, y)`` tuples in the world frame unless stated otherwise; field p
 are in the robot frame (x ahead of the robot's base, y to its left).
 
 Every class validates itself in ``__post_init__`` (so a spec built in Python is checked
-as well as one loaded from a file) and raises :class:`~worlds.errors.SpecError` with the
+as well as one loaded from a file) and raises :class:`~semistatic.errors.SpecError` with the
 offending key relative to the object; the loader re-anchors it in the file. Sequences
 are normalised to tuples of floats, so specs are hashable and immutable.
 
@@ -29,7 +29,7 @@ Examples
 >>> PostSpec(0.0, 0.0, radius=-1.0)
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: <memory>: radius: must be > 0.0 and <= 2.0, got -1.0
+semistatic.errors.SpecError: <memory>: radius: must be > 0.0 and <= 2.0, got -1.0
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 import shapely
 
-from worlds.errors import MEMORY, SpecError
-from worlds.validation import bounds, check_fields, did_you_mean, safe_name
+from semistatic.errors import MEMORY, SpecError
+from semistatic.validation import bounds, check_fields, did_you_mean, safe_name
 
 __all__ = [
     "BOX_SIZE",
@@ -336,7 +336,7 @@ class SegmentSpec:
     >>> SegmentSpec("s", 0, 1, warning=square, protective=[(0.3, -0.3), (0.9, 0.0), (0.3, 0.3)])
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: protective: protective field is not inside the \
+    semistatic.errors.SpecError: <memory>: protective: protective field is not inside the \
 warning field (0.045 m2 of it sticks out); shrink protective or widen warning
     """
 
@@ -519,7 +519,7 @@ class WorldSpec:
     ...           people=[], path=path)
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: posts[1]: overlaps posts[0] (centres 0.05 m apart, \
+    semistatic.errors.SpecError: <memory>: posts[1]: overlaps posts[0] (centres 0.05 m apart, \
 radii 0.04 + 0.04 m)
     """
 
@@ -582,7 +582,7 @@ radii 0.04 + 0.04 m)
         >>> world.enable_people("waker")
         Traceback (most recent call last):
         ...
-        worlds.errors.SpecError: <memory>: people: no person named 'waker' (did you mean \
+        semistatic.errors.SpecError: <memory>: people: no person named 'waker' (did you mean \
 'walker'?)
         """
         known = [person.name for person in self.people]

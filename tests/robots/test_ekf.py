@@ -15,6 +15,7 @@ from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, range_bearing_model
 from semistatic.frames import between, compose, wrap_angle
 from tests.robots.ekf_reference import ReferenceEKF
+from tests.spec_errors import raises_spec_error
 
 MOUNT = (0.25, 0.05, 0.1)
 RANGE_SIGMA = 0.012
@@ -350,12 +351,23 @@ def test_initialize_and_params_validate_their_input():
     ekf = EKFLocalizer(POSTS)
     with pytest.raises(ValueError, match="finite"):
         ekf.initialize([0.0, np.nan, 0.0], np.eye(3))
-    with pytest.raises(ValueError, match="mount"):
+    with raises_spec_error("mount", "expected a list of 3 numbers, got 2 value"):
         EKFParams(mount=(0.0, 0.0))
-    with pytest.raises(ValueError, match="nis_gate"):
+    with raises_spec_error("mount", r"every value must be >= -20.0 and <= 20.0, got \[30.0"):
+        EKFParams(mount=(30.0, 0.0, 0.0))
+    with raises_spec_error("nis_gate", r"must be > 0.0 and <= 100.0, got -1.0 \(a chi-square"):
         EKFParams(nis_gate=-1.0)
-    with pytest.raises(ValueError, match="translation_sigma"):
+    with raises_spec_error("translation_sigma", "must be a finite number, got nan"):
         EKFParams(translation_sigma=float("nan"))
+    with raises_spec_error("translation_sigma", "<= 1.0, got 2.0"):
+        EKFParams(translation_sigma=2.0)
+    with raises_spec_error("outage_timeout", "<= 3600.0, got 7200.0"):
+        EKFParams(outage_timeout=7200.0)
+    with raises_spec_error("min_reliability", ">= 0.0 and <= 1.0, got -1e-06"):
+        EKFParams(min_reliability=-1e-6)
+    with raises_spec_error("record_history", "expected true or false, got an integer 1"):
+        EKFParams(record_history=1)
+    assert EKFParams(mount=np.array([0.1, 0.0, 0.0])).mount == (0.1, 0.0, 0.0)
 
 
 def test_initialising_without_a_stamp_starts_the_outage_timer_at_the_first_update():

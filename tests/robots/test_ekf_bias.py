@@ -17,6 +17,7 @@ from robots.ekf import EKFLocalizer, EKFParams, _positive_definite
 from robots.landmarks import LandmarkObservation, range_bearing_model
 from semistatic.frames import compose, wrap_angle
 from tests.robots.test_ekf import DT, MOUNT, POSTS, observe, true_increments
+from tests.spec_errors import raises_spec_error
 
 BIAS_MAX = 0.03
 # The prior 1-sigma that matches a bias uniform in [-BIAS_MAX, BIAS_MAX].
@@ -361,14 +362,14 @@ def test_positive_definite_check_agrees_with_the_eigenvalues():
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "match"),
+    ("kwargs", "key", "match"),
     [
-        ({"range_bias_sigma": -0.01}, "range_bias_sigma"),
-        ({"range_bias_sigma": float("inf")}, "range_bias_sigma"),
-        ({"range_bias_sigma": 0.01, "range_bias_walk": float("nan")}, "range_bias_walk"),
-        ({"range_bias_walk": 1e-4}, "needs the bias state"),
+        ({"range_bias_sigma": -0.01}, "range_bias_sigma", ">= 0.0 and <= 1.0, got -0.01"),
+        ({"range_bias_sigma": float("inf")}, "range_bias_sigma", "finite number, got inf"),
+        ({"range_bias_sigma": 0.01, "range_bias_walk": float("nan")}, "range_bias_walk", "nan"),
+        ({"range_bias_walk": 1e-4}, "range_bias_walk", "needs the bias state"),
     ],
 )
-def test_bias_params_are_validated(kwargs, match):
-    with pytest.raises(ValueError, match=match):
+def test_bias_params_are_validated(kwargs, key, match):
+    with raises_spec_error(key, match):
         EKFParams(**kwargs)

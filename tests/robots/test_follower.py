@@ -10,6 +10,7 @@ import pytest
 from robots.follower import ChainedFormFollower, FollowerParams
 from robots.path import SplinePath
 from tests.robots.follower_reference import ArrayPathFollower
+from tests.spec_errors import raises_spec_error
 
 DT = 0.02
 NO_LIMITS = {
@@ -262,16 +263,25 @@ def test_large_heading_error_still_turns_toward_the_path():
 @pytest.mark.parametrize(
     ("field", "value", "match"),
     [
-        ("speed", 0.0, "speed must be > 0"),
-        ("k1", -3.0, "k1 must be > 0"),
-        ("k3", math.nan, "k3 must be > 0"),
-        ("max_acceleration", 0.0, "max_acceleration must be > 0"),
-        ("goal_tolerance", math.inf, "goal_tolerance must be finite"),
+        ("speed", 0.0, r"must be > 0.0 and <= 20.0, got 0.0 \(m/s"),
+        ("speed", 30.0, "<= 20.0, got 30.0"),
+        ("k1", -3.0, r"> 0.0 and <= 100.0, got -3.0 \(1/m, along-track gain"),
+        ("k3", math.nan, "must be a finite number, got nan"),
+        ("max_acceleration", 0.0, r"must be > 0.0 .*math.inf disables it"),
+        ("max_speed", -math.inf, "must be a finite number, got -inf"),
+        ("max_angular_speed", 25.0, "<= 20.0, got 25.0"),
+        ("goal_tolerance", math.inf, "must be a finite number, got inf"),
     ],
 )
 def test_bad_params_are_rejected(field, value, match):
-    with pytest.raises(ValueError, match=match):
+    with raises_spec_error(field, match):
         FollowerParams(**{field: value})
+
+
+def test_limits_may_be_switched_off_with_inf():
+    params = FollowerParams(**NO_LIMITS)
+    assert all(getattr(params, name) == math.inf for name in NO_LIMITS)
+    assert type(FollowerParams(speed=1).speed) is float
 
 
 def test_bad_command_arguments_are_rejected():

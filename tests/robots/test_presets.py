@@ -18,6 +18,7 @@ from robots.urdf import (
     ugv_urdf,
     write_urdf,
 )
+from tests.spec_errors import raises_spec_error
 
 ALL_PRESETS = sorted(PRESETS.values(), key=lambda spec: spec.name)
 
@@ -104,44 +105,63 @@ def test_wheel_speeds_of_simple_motions():
 
 
 @pytest.mark.parametrize(
-    ("changes", "message"),
+    ("changes", "key", "message"),
     [
-        ({"wheel_radius": 0.0}, "wheel_radius must be a finite number > 0"),
-        ({"body_mass": float("nan")}, "body_mass must be a finite number > 0"),
-        ({"wheel_separation": 0.04}, "wheel_separation .* must exceed wheel_width"),
-        ({"encoder_slip_sigma": -0.1}, "encoder_slip_sigma must be >= 0"),
-        ({"encoder_ticks_per_rev": 0}, "encoder_ticks_per_rev must be > 0"),
-        ({"ground_clearance": 0.3}, "ground_clearance must be in"),
-        ({"caster_positions": ()}, "caster_positions must be a non-empty"),
-        ({"caster_positions": ((0.2, 0.0),)}, "centre of mass .* must lie strictly between"),
-        ({"footprint": ((0, 0), (1, 0))}, "at least 3"),
-        ({"footprint": ((0, 0), (0, 1), (1, 0))}, "counter-clockwise"),
-        ({"name": "Pioneer"}, "lower-case"),
-        ({"max_wheel_torque": -1.0}, "max_wheel_torque must be a finite number > 0"),
+        ({"wheel_radius": 0.0}, "wheel_radius", r"must be > 0.0 and <= 2.0, got 0.0 \(metres"),
+        ({"wheel_radius": 5.0}, "wheel_radius", r"must be > 0.0 and <= 2.0, got 5.0"),
+        ({"body_mass": float("nan")}, "body_mass", "must be a finite number, got nan"),
+        ({"body_mass": 1e6}, "body_mass", r"<= 50000.0, got 1000000.0 \(kg\)"),
+        ({"body_length": 30.0}, "body_length", "<= 20.0, got 30.0"),
+        ({"wheel_separation": 0.04}, "wheel_separation", r"must exceed wheel_width \(0.047 m\)"),
+        ({"encoder_slip_sigma": -0.1}, "encoder_slip_sigma", ">= 0.0 and <= 1.0, got -0.1"),
+        ({"encoder_ticks_per_rev": 0}, "encoder_ticks_per_rev", ">= 1 .*, got 0"),
+        ({"encoder_ticks_per_rev": 19150.5}, "encoder_ticks_per_rev", "expected an integer"),
+        ({"encoder_ticks_per_rev": True}, "encoder_ticks_per_rev", "expected an integer"),
+        ({"ground_clearance": 0.3}, "ground_clearance", r"must be < body_height \(0.237 m\)"),
+        ({"caster_positions": ()}, "caster_positions", "at least one"),
+        ({"caster_positions": ((0.0, 0.0, 0.0),)}, "caster_positions[0]", "list of 2 numbers"),
+        ({"caster_positions": ((-25.0, 0.0),)}, "caster_positions[0]", "every value must be"),
+        ({"caster_positions": ((0.2, 0.0),)}, "caster_positions", "centre of mass .* strictly"),
+        ({"footprint": ((0, 0), (1, 0))}, "footprint", "at least 3"),
+        ({"footprint": ((0, 0), (0, 1), (1, 0))}, "footprint", "counter-clockwise"),
+        ({"footprint": ((0, 0), (1, float("inf")), (0, 1))}, "footprint[1][1]", "finite"),
+        ({"name": "Pioneer"}, "name", "lower-case"),
+        ({"max_wheel_torque": -1.0}, "max_wheel_torque", r"> 0.0 .*, got -1.0 \(N m"),
+        ({"max_wheel_speed": 1000.0}, "max_wheel_speed", "<= 500.0, got 1000.0"),
     ],
 )
-def test_spec_validation_names_the_parameter(changes, message):
-    with pytest.raises(ValueError, match=message):
+def test_spec_built_in_code_names_the_key(changes, key, message):
+    with raises_spec_error(key, message):
         PIONEER3DX.replace(**changes)
 
 
-def test_spec_validation_rejects_wrong_types():
-    with pytest.raises(TypeError, match="encoder_ticks_per_rev must be an int"):
-        PIONEER3DX.replace(encoder_ticks_per_rev=19150.5)
+def test_spec_validation_rejects_a_laser_where_a_mount_belongs():
     with pytest.raises(TypeError, match="safety_laser must be a LaserMount"):
         PIONEER3DX.replace(safety_laser=LMS100)
 
 
+def test_spec_fields_are_converted_to_plain_python_numbers():
+    spec = PIONEER3DX.replace(
+        wheel_radius=np.float32(0.1), encoder_ticks_per_rev=np.int64(1000), body_mass=8
+    )
+    assert type(spec.wheel_radius) is float
+    assert type(spec.body_mass) is float
+    assert type(spec.encoder_ticks_per_rev) is int
+    assert spec.caster_positions == ((-0.2, 0.0),)
+
+
 @pytest.mark.parametrize(
-    ("kwargs", "message"),
+    ("kwargs", "key", "message"),
     [
-        ({"z": 0.0}, "z must be a finite number > 0"),
-        ({"z": 0.3, "yaw": 4.0}, r"yaw must be in \(-pi, pi\]"),
-        ({"z": 0.3, "x": float("inf")}, "x must be a finite number"),
+        ({"z": 0.0}, "z", r"must be > 0.0 and <= 10.0, got 0.0 \(metres: height"),
+        ({"z": 0.3, "yaw": 4.0}, "yaw", r"> -3.14.* and <= 3.14.*, got 4.0 \(wrap it"),
+        ({"z": 0.3, "yaw": -math.pi}, "yaw", "> -3.14"),
+        ({"z": 0.3, "x": float("inf")}, "x", "must be a finite number, got inf"),
+        ({"z": 0.3, "y": 21.0}, "y", "<= 20.0, got 21.0"),
     ],
 )
-def test_laser_mount_validation(kwargs, message):
-    with pytest.raises(ValueError, match=message):
+def test_laser_mount_validation(kwargs, key, message):
+    with raises_spec_error(key, message):
         LaserMount(LMS100, **{"x": 0.0, "y": 0.0, **kwargs})
 
 

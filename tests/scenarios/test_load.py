@@ -24,8 +24,8 @@ from scenarios.load import (
     scenario_from_toml,
 )
 from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
+from semistatic.errors import SpecError
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems
-from worlds.errors import SpecError
 from worlds.load import DATA_DIR as WORLD_DATA_DIR
 from worlds.load import load_world
 
@@ -529,7 +529,9 @@ def test_world_for_lap_counts_laps_from_1(lap):
          "lap_timeout"),
         (lambda: ScenarioSpec(name="../up", world="sim1"), 'name = "../up"', "name"),
         (lambda: Rates(safety_hz=float("nan")), "[rates]\nsafety_hz = nan", "rates.safety_hz"),
+        (lambda: Rates(control_hz=300.0), "[rates]\ncontrol_hz = 300.0", "rates.control_hz"),
         (lambda: Noise(range=-1.0), "[noise]\nrange = -1.0", "noise.range"),
+        (lambda: SafetySettings(slowdown=0), "[safety]\nslowdown = 0", "safety.slowdown"),
         (lambda: SafetySettings(min_points=2.5), "[safety]\nmin_points = 2.5",
          "safety.min_points"),
         (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0),

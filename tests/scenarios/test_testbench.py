@@ -12,8 +12,8 @@ from scenarios.outputs import summarize
 from scenarios.policies import FieldReadings, FieldView, counted_occupancy
 from scenarios.runner import run_scenario
 from semistatic.adaptation import minimum_protective_field
+from semistatic.errors import MEMORY
 from tests.scenarios.tiny_world import write_tiny
-from worlds.errors import MEMORY
 from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
 
 

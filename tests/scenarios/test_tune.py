@@ -26,9 +26,9 @@ from scenarios.tune import (
     sweep_row,
     write_sweep,
 )
+from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
-from worlds.errors import SpecError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GATES = (0.08, 0.16)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from semistatic.errors import MEMORY
+from semistatic.validation import FILE_KEY, bounds, from_table
 from worlds import (
     BoxSpec,
     PathSpec,
@@ -20,8 +22,6 @@ from worlds import (
     bundled_worlds,
     load_world,
 )
-from worlds.errors import MEMORY
-from worlds.validation import FILE_KEY, bounds, from_table
 
 GOOD = """\
 name = "tiny"

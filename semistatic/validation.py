@@ -1,8 +1,9 @@
 """Turn TOML tables into frozen dataclasses, or say exactly which key is wrong and why.
 
-This layer is generic: nothing here knows about worlds. It reads a TOML file with
-``tomllib`` (never ``eval``), and :func:`from_table` builds any frozen dataclass from a
-table, driven by the dataclass's own field types:
+This layer is generic: nothing here knows about worlds, robots or scenarios, which all
+use it. It reads a TOML file with ``tomllib`` (never ``eval``), :func:`from_table` builds
+any frozen dataclass from a table and :func:`check_fields` validates one built in code,
+both driven by the dataclass's own field types:
 
 - ``float``, ``int``, ``str``, ``bool``: checked strictly (``true`` is not a number,
   ``1.5`` is not an int, an int is accepted for a float; ``nan``/``inf`` are rejected);
@@ -10,7 +11,7 @@ table, driven by the dataclass's own field types:
 - ``tuple[X, ...]``: a list whose items are converted as ``X``;
 - a nested dataclass: a (inline) table, converted recursively;
 - ``Range`` in a field's metadata (``field(metadata=bounds(gt=0.0))``) range-checks
-  the value, or every number in it.
+  the value, or every number in it; :func:`unlimited` also lets code pass ``math.inf``.
 
 Unknown keys are rejected at every level with a difflib "did you mean" suggestion.
 Errors raised by a dataclass's ``__post_init__`` as :class:`SpecError` with a key
@@ -28,7 +29,7 @@ Box(name='a', size=(0.4, 0.4, 0.5))
 >>> from_table(Box, {"name": "a", "sise": [1, 1, 1]}, file="w.toml", key="boxes[0]")
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: w.toml: boxes[0].sise: unknown key (did you mean 'size'?); \
+semistatic.errors.SpecError: w.toml: boxes[0].sise: unknown key (did you mean 'size'?); \
 allowed keys: name, size
 """
 
@@ -49,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from worlds.errors import MEMORY, SpecError, join_key
+from semistatic.errors import MEMORY, SpecError, join_key
 
 __all__ = [
     "FILE_KEY",
@@ -65,9 +66,11 @@ __all__ = [
     "convert",
     "did_you_mean",
     "from_table",
+    "or_object",
     "read_toml",
     "reject_unknown_keys",
     "safe_name",
+    "unlimited",
 ]
 
 FILE_KEY = "<file>"
@@ -86,18 +89,24 @@ _TOML_POSITION = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 class Range:
     """Bounds a number must satisfy; ``None`` means unbounded on that side.
 
+    ``fix`` tells the user what a valid value looks like (units, a typical figure); it
+    ends every out-of-range message.
+
     Examples
     --------
     >>> Range(gt=0.0).describe()
     '> 0.0'
     >>> Range(ge=0.0, le=1.0).contains(1.5)
     False
+    >>> Range(gt=0.0, fix="metres, e.g. 0.1").complaint(-1.0)
+    'must be > 0.0, got -1.0 (metres, e.g. 0.1)'
     """
 
     gt: float | None = None
     ge: float | None = None
     lt: float | None = None
     le: float | None = None
+    fix: str = ""
 
     def contains(self, value: float) -> bool:
         """Return whether ``value`` satisfies every bound."""
@@ -117,6 +126,12 @@ class Range:
         ]
         return " and ".join(parts) if parts else "any value"
 
+    def complaint(self, got: Any, *, every: bool = False) -> str:
+        """Return the message for a value ``got`` outside the bounds (``every`` for lists)."""
+        subject = "every value must be" if every else "must be"
+        fix = f" ({self.fix})" if self.fix else ""
+        return f"{subject} {self.describe()}, got {got}{fix}"
+
 
 def bounds(
     *,
@@ -124,15 +139,33 @@ def bounds(
     ge: float | None = None,
     lt: float | None = None,
     le: float | None = None,
+    fix: str = "",
 ) -> dict[str, Range]:
     """Return dataclass field metadata that range-checks the field on load.
+
+    ``fix`` (units, a typical value) is appended to the message of a value out of range.
 
     Examples
     --------
     >>> bounds(gt=0.0)
-    {'range': Range(gt=0.0, ge=None, lt=None, le=None)}
+    {'range': Range(gt=0.0, ge=None, lt=None, le=None, fix='')}
     """
-    return {"range": Range(gt=gt, ge=ge, lt=lt, le=le)}
+    return {"range": Range(gt=gt, ge=ge, lt=lt, le=le, fix=fix)}
+
+
+def unlimited() -> dict[str, bool]:
+    """Return field metadata for a limit that code may switch off with ``math.inf``.
+
+    Combine it with :func:`bounds`: ``metadata={**bounds(gt=0.0, le=20.0), **unlimited()}``.
+    Only ``+inf`` passes unchecked, and only in :func:`check_fields` (a file's ``inf``
+    is still rejected); any finite value must satisfy the bounds.
+
+    Examples
+    --------
+    >>> unlimited()
+    {'unlimited': True}
+    """
+    return {"unlimited": True}
 
 
 def safe_name() -> dict[str, bool]:
@@ -199,7 +232,7 @@ def reject_unknown_keys(
     >>> reject_unknown_keys({"radus": 1.0}, ["radius", "height"], file="f", key="posts[0]")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: posts[0].radus: unknown key (did you mean 'radius'?); \
+    semistatic.errors.SpecError: f: posts[0].radus: unknown key (did you mean 'radius'?); \
 allowed keys: height, radius
     """
     allowed = sorted(allowed)
@@ -227,7 +260,7 @@ def as_table(value: Any, *, file: str, key: str) -> dict[str, Any]:
 
 def _check_range(value: float, valid: Range | None, *, file: str, key: str) -> None:
     if valid is not None and not valid.contains(value):
-        raise SpecError(file, key, f"must be {valid.describe()}, got {value}")
+        raise SpecError(file, key, valid.complaint(value))
 
 
 def as_float(value: Any, *, file: str, key: str, valid: Range | None = None) -> float:
@@ -240,7 +273,7 @@ def as_float(value: Any, *, file: str, key: str, valid: Range | None = None) -> 
     >>> as_float(-1.0, file="f", key="speed", valid=Range(gt=0.0))
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: speed: must be > 0.0, got -1.0
+    semistatic.errors.SpecError: f: speed: must be > 0.0, got -1.0
     """
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SpecError(file, key, f"expected a number, got {_describe(value)}")
@@ -261,7 +294,7 @@ def as_int(value: Any, *, file: str, key: str, valid: Range | None = None) -> in
     >>> as_int(3.0, file="f", key="end_knot")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: end_knot: expected an integer, got a float 3.0
+    semistatic.errors.SpecError: f: end_knot: expected an integer, got a float 3.0
     """
     if isinstance(value, bool) or not isinstance(value, int):
         raise SpecError(file, key, f"expected an integer, got {_describe(value)}")
@@ -307,7 +340,7 @@ def as_floats(
     >>> as_floats([1.0], 2, file="f", key="start")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: start: expected a list of 2 numbers, got 1 value(s)
+    semistatic.errors.SpecError: f: start: expected a list of 2 numbers, got 1 value(s)
     """
     if not isinstance(value, list):
         raise SpecError(file, key, f"expected a list of {n} numbers, got {_describe(value)}")
@@ -319,9 +352,7 @@ def as_floats(
     )
     for number in numbers:
         if valid is not None and not valid.contains(number):
-            raise SpecError(
-                file, key, f"every value must be {valid.describe()}, got {list(numbers)}"
-            )
+            raise SpecError(file, key, valid.complaint(list(numbers), every=True))
     return numbers
 
 
@@ -400,7 +431,7 @@ def from_table(
     >>> from_table(Post, {}, file="f", key="posts[0]")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: f: posts[0].x: missing required key
+    semistatic.errors.SpecError: f: posts[0].x: missing required key
     """
     fixed = dict(fixed or {})
     table = as_table(table, file=file, key=key)
@@ -428,12 +459,11 @@ def from_table(
 
 
 @functools.cache
-def _checked_fields(cls: type) -> tuple[tuple[str, Any, Range | None, bool, bool], ...]:
-    """Return ``(name, hint, range, safe name, or object)`` of the fields to convert."""
+def _checked_fields(cls: type) -> tuple[tuple[str, Any, Mapping[str, Any]], ...]:
+    """Return ``(name, type hint, metadata)`` of the fields :func:`check_fields` converts."""
     hints = typing.get_type_hints(cls)
     return tuple(
-        (field.name, hints[field.name], field.metadata.get("range"),
-         field.metadata.get("safe_name", False), field.metadata.get("or_object", False))
+        (field.name, hints[field.name], field.metadata)
         for field in dataclasses.fields(cls)
         if field.init and _is_plain(hints[field.name])
     )
@@ -465,8 +495,9 @@ def check_fields(obj: Any) -> None:
     Numbers, strings, booleans and tuples of them are converted with :func:`convert`
     against the field's type and range metadata, so a spec built in Python fails with
     the same message as a file (its file reads ``<memory>``, its key is the field's
-    name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``. Nested
-    dataclasses validate themselves. Call it first in ``__post_init__``.
+    name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``, one with
+    :func:`unlimited` metadata may also be ``math.inf``. Nested dataclasses validate
+    themselves. Call it first in ``__post_init__``.
 
     Examples
     --------
@@ -479,17 +510,21 @@ def check_fields(obj: Any) -> None:
     >>> Wheel(radius=2).radius
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: <memory>: radius: must be > 0.0 and <= 1.0, got 2.0
+    semistatic.errors.SpecError: <memory>: radius: must be > 0.0 and <= 1.0, got 2.0
     >>> Wheel(radius=np.float32(0.5)).radius
     0.5
     """
-    for name, hint, valid, path_like, or_object_ in _checked_fields(type(obj)):
-        if getattr(obj, name) is None and type(None) in typing.get_args(hint):
+    for name, hint, metadata in _checked_fields(type(obj)):
+        given = getattr(obj, name)
+        if given is None and type(None) in typing.get_args(hint):
             continue
-        if or_object_ and not isinstance(getattr(obj, name), str | int | float | bool):
+        if metadata.get("or_object") and not isinstance(given, str | int | float | bool):
             continue
-        value = convert(hint, _as_toml(getattr(obj, name)), file=MEMORY, key=name, valid=valid)
-        if path_like and not SAFE_NAME.fullmatch(value):
+        if metadata.get("unlimited") and isinstance(given, float) and given == math.inf:
+            object.__setattr__(obj, name, math.inf)
+            continue
+        value = convert(hint, _as_toml(given), file=MEMORY, key=name, valid=metadata.get("range"))
+        if metadata.get("safe_name") and not SAFE_NAME.fullmatch(value):
             raise SpecError(
                 MEMORY, name,
                 f"{value!r} is not a usable name: use 1-64 letters, digits, '_', '-' or '.', "
@@ -508,7 +543,7 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     >>> read_toml("/no/such/world.toml")
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: /no/such/world.toml: <file>: no such file
+    semistatic.errors.SpecError: /no/such/world.toml: <file>: no such file
     """
     path = Path(path)
     try:
