@@ -348,8 +348,10 @@ def drive_along_corridor(mapper, rng):
 def test_corridor_drive_keeps_one_polyline_per_object(mode):
     mapper = PolylineMap(MapperParams(hausdorff_restriction=mode))
     drive_along_corridor(mapper, np.random.default_rng(6))
-    walls = [entry for entry in mapper if entry.polyline.length > 5.0]
-    assert [round(entry.polyline.length) for entry in walls] == [14, 14]
+    walls = [entry.polyline.length for entry in mapper if entry.polyline.length > 5.0]
+    # each 14 m wall is one polyline; its far ends, seen at grazing beams, fall short
+    assert len(walls) == 2
+    assert all(13.0 < length < 14.0 for length in walls)
     # The box: one polyline for the faces seen on the way in, one for its back face seen
     # on the way out (faces that only meet at a corner are not joined).
     assert len(mapper) <= 4

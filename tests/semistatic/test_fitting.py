@@ -1,0 +1,119 @@
+"""Fitted vertices (semistatic.fitting) against SVD line fits and known geometry."""
+
+import numpy as np
+import pytest
+
+from semistatic.extraction import douglas_peucker, extract_polylines
+from semistatic.fitting import fit_polyline, total_least_squares
+from semistatic.params import MapperParams
+from tests.semistatic.synthetic import box, box_corners, cast_scan, scene, wall
+
+
+def svd_line(points):
+    centroid = points.mean(axis=0)
+    _, _, rows = np.linalg.svd(points - centroid)
+    return centroid, rows[0]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_total_least_squares_matches_an_svd_fit(seed):
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(2, 40))
+    direction = rng.normal(size=2)
+    points = rng.normal(size=(1, 2)) + np.outer(rng.uniform(-2, 2, count), direction)
+    points += rng.normal(0.0, 0.05, points.shape)
+    centroid, unit = total_least_squares(points)
+    expected_centroid, expected_unit = svd_line(points)
+    np.testing.assert_allclose(centroid, expected_centroid, atol=1e-12)
+    assert abs(unit @ expected_unit) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_total_least_squares_rejects_degenerate_input():
+    with pytest.raises(ValueError, match="at least 2"):
+        total_least_squares([[1.0, 2.0]])
+    with pytest.raises(ValueError, match="all points are equal"):
+        total_least_squares([[1.0, 2.0], [1.0, 2.0]])
+
+
+def noisy_corner(rng, noise=0.01, step=0.05):
+    """Readings of a right-angle corner at (2, 0) seen from the origin, in scan order."""
+    along = np.arange(0.0, 0.8 + 1e-9, step)
+    first = np.column_stack((2.0 + 0.0 * along, -0.8 + along))
+    second = np.column_stack((2.0 + 0.6 * along[1:], 0.8 * along[1:]))
+    return np.vstack((first, second)) + rng.normal(0.0, noise, (2 * along.size - 1, 2))
+
+
+def test_an_inner_vertex_lands_nearer_the_true_corner_than_the_raw_reading():
+    fitted_errors, raw_errors = [], []
+    for seed in range(30):
+        points = noisy_corner(np.random.default_rng(seed))
+        corners = douglas_peucker(points, 0.03)
+        vertices, kept = fit_polyline(points, corners, 0.03)
+        inner = np.argmin(np.hypot(*(points[kept] - [2.0, 0.0]).T))
+        fitted_errors.append(np.hypot(*(vertices[inner] - [2.0, 0.0])))
+        raw_errors.append(np.hypot(*(points[kept][inner] - [2.0, 0.0])))
+    fitted = np.sqrt(np.mean(np.square(fitted_errors)))
+    raw = np.sqrt(np.mean(np.square(raw_errors)))
+    assert fitted < 0.6 * raw
+
+
+def test_end_vertices_lie_on_the_end_readings_beams():
+    points = noisy_corner(np.random.default_rng(3))
+    vertices, kept = fit_polyline(points, douglas_peucker(points, 0.03), 0.03)
+    for vertex, reading in ((vertices[0], points[kept[0]]), (vertices[-1], points[kept[-1]])):
+        cross = vertex[0] * reading[1] - vertex[1] * reading[0]
+        assert abs(cross) < 1e-12 * np.hypot(*reading) + 1e-12
+        assert vertex @ reading > 0.0  # the same side of the sensor
+
+
+def test_adjacent_edges_one_line_fits_are_merged():
+    rng = np.random.default_rng(0)
+    points = np.column_stack((np.full(41, 3.0), np.linspace(-1.0, 1.0, 41)))
+    points[:, 0] += rng.normal(0.0, 0.005, 41)
+    vertices, kept = fit_polyline(points, [0, 10, 20, 30, 40], 0.03)
+    assert kept.tolist() == [0, 40]
+    assert np.abs(vertices[:, 0] - 3.0).max() < 0.01
+    # a tolerance below the noise keeps the corners; collinear lines fall back to the
+    # corner readings' projections instead of an ill-conditioned intersection
+    vertices, kept = fit_polyline(points, [0, 10, 20, 30, 40], 1e-4)
+    assert len(kept) > 2
+    assert np.all(np.hypot(*(vertices - points[kept]).T) < 0.02)
+
+
+def test_fit_polyline_rejects_bad_corners():
+    points = [[1.0, 0.0], [1.0, 0.1], [1.0, 0.2]]
+    with pytest.raises(ValueError, match="corners must increase"):
+        fit_polyline(points, [0, 1], 0.03)
+    with pytest.raises(ValueError, match="epsilon"):
+        fit_polyline(points, [0, 2], 0.0)
+
+
+def test_fitted_box_outline_is_closer_to_the_truth_than_raw_vertices():
+    # a box seen corner-on: two faces; error of the vertices to the box outline
+    segments = scene(box((3.0, 0.0), 1.0, 0.8, yaw=0.5))
+    corners = box_corners((3.0, 0.0), 1.0, 0.8, yaw=0.5)
+    errors = {"fitted": [], "raw": []}
+    for seed in range(20):
+        scan = cast_scan(segments, (0.0, 0.0, 0.0), noise=0.01, rng=np.random.default_rng(seed))
+        for placement, bucket in errors.items():
+            lines = extract_polylines(scan, MapperParams(vertex_placement=placement))
+            assert len(lines) == 1
+            vertices = lines[0].points
+            offsets = vertices[:, None, :] - corners[None]
+            near = np.hypot(offsets[..., 0], offsets[..., 1]).min(axis=1)
+            bucket.append(near[1:-1])  # inner vertices are box corners
+    fitted = np.sqrt(np.mean(np.square(np.concatenate(errors["fitted"]))))
+    raw = np.sqrt(np.mean(np.square(np.concatenate(errors["raw"]))))
+    assert fitted < 0.6 * raw
+
+
+def test_a_two_reading_object_becomes_a_polyline():
+    # a 4 cm pole 3 m ahead, in front of a wall: two beams hit it
+    segments = scene(wall((5.0, -3.0), (5.0, 3.0)), box((3.0, 0.0131), 0.04, 0.04))
+    scan = cast_scan(segments, (0.0, 0.0, 0.0))
+    hits = np.flatnonzero(scan.ranges < 3.1)
+    assert hits.size == 2
+    lines = extract_polylines(scan)
+    assert [line.scan_indices.tolist() for line in lines if line.points[:, 0].max() < 3.1] == [
+        hits.tolist()
+    ]
