@@ -78,9 +78,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     replay.add_argument("--lenient", action="store_true", help="skip and count malformed lines")
     replay.add_argument(
-        "--auto-noise", action="store_true",
-        help="fit epsilon (>= 3 sigma) and the breakpoint noise (>= sigma) to the range noise "
-             "measured on the first 50 scans",
+        "--auto-noise", action=argparse.BooleanOptionalAction, default=True,
+        help="set epsilon to 3 sigma and the breakpoint noise to >= sigma of the range noise "
+             "measured on the first 50 scans (default); --no-auto-noise keeps the fixed ones",
     )
     replay.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="mapper.KEY=VALUE",
