@@ -17,6 +17,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from scenarios.evaluate import add_parser as add_evaluate_parser
+from scenarios.evaluate import main_evaluate
 from scenarios.tune import add_parser as add_tune_parser
 from scenarios.tune import main_tune
 from worlds.errors import SpecError
@@ -98,6 +100,7 @@ def _parser() -> argparse.ArgumentParser:
         help="also run each scenario with adaptive fields and compare lap times",
     )
     add_tune_parser(commands)
+    add_evaluate_parser(commands)
     return parser
 
 
@@ -326,7 +329,8 @@ def _replay(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``semistatic`` command line; return the exit status."""
     args = _parser().parse_args(argv)
-    handlers = {"run": _run, "table": _table, "replay": _replay, "tune": main_tune}
+    handlers = {"run": _run, "table": _table, "replay": _replay, "tune": main_tune,
+                "evaluate": main_evaluate}
     try:
         return handlers[args.command](args)
     except (SpecError, InputError) as error:

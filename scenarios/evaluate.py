@@ -1,0 +1,146 @@
+"""``semistatic evaluate LOG``: extraction accuracy on a real log with PLE's ray-wise metric.
+
+Scores the paper's pipeline, the default extraction and the split-and-merge baseline
+(:data:`semistatic.evaluation.EXTRACTORS`) on one scan in ``--every`` of a CARMEN log or
+bag, with replay's thresholds (:data:`scenarios.replay.REPLAY_PARAMS`) and the
+Douglas-Peucker tolerance fitted to the log's measured range noise, as replay does.
+``--sweep`` adds a curve of RMSE against vertices per scan over several tolerances,
+written to ``DIR/evaluation.json`` and ``DIR/figures/rmse_vertices.png``.
+
+Examples
+--------
+>>> parser = argparse.ArgumentParser(prog="semistatic")
+>>> _ = add_parser(parser.add_subparsers(dest="command"))
+>>> args = parser.parse_args(["evaluate", "intel.log.gz", "--sweep", "0.01,0.02"])
+>>> args.every, args.sweep
+(5, '0.01,0.02')
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+from pathlib import Path
+
+from scenarios.outputs import stage_and_publish
+from scenarios.replay import NOISE_SCANS, REPLAY_PARAMS, open_log
+from semistatic.evaluation import EXTRACTORS, RayScore, tolerance_sweep
+from semistatic.noise import estimate_range_noise, noise_params
+from worlds.errors import SpecError
+
+__all__ = ["add_parser", "main_evaluate", "score_row"]
+
+
+COMMAND_LINE = "<command line>"
+
+
+def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``semistatic evaluate`` on the subparsers ``commands``; return its parser."""
+    evaluate = commands.add_parser(
+        "evaluate", help="score polyline extraction on a real log (PLE's ray-wise RMSE)"
+    )
+    evaluate.add_argument("log", type=Path, help="CARMEN log (.log, .gz) or ROS 1/2 bag")
+    evaluate.add_argument("--every", type=int, default=5, help="score one scan in N (default 5)")
+    evaluate.add_argument(
+        "--sweep", metavar="EPS,...",
+        help="also trace RMSE against vertices per scan at these tolerances (m)",
+    )
+    evaluate.add_argument(
+        "--out", type=Path, help="output directory (default results/evaluate-LOG)"
+    )
+    return evaluate
+
+
+def score_row(method: str, epsilon: float, score: RayScore) -> str:
+    """Return one printed row: method, tolerance, RMSE, coverage, vertices per scan.
+
+    Examples
+    --------
+    >>> score_row("default", 0.015, RayScore(2, 100, 98, 0.0098, 40, 10))
+    'default           1.50 cm   RMSE 1.00 cm   f 0.980   20.0 vertices/scan'
+    """
+    return (
+        f"{method:<16} {100 * epsilon:5.2f} cm   RMSE {100 * score.rmse:.2f} cm   "
+        f"f {score.coverage:.3f}   {score.vertices_per_scan:.1f} vertices/scan"
+    )
+
+
+def _tolerances(text: str | None) -> list[float]:
+    if text is None:
+        return []
+    try:
+        values = [float(part) for part in text.split(",")]
+    except ValueError:
+        raise SpecError(COMMAND_LINE, "--sweep",
+                        f"{text!r}: give tolerances in metres, e.g. 0.01,0.02,0.03") from None
+    if not all(value > 0.0 for value in values):
+        raise SpecError(COMMAND_LINE, "--sweep", f"{text!r}: every tolerance must be > 0 m")
+    return values
+
+
+def main_evaluate(args: argparse.Namespace) -> int:
+    """Run ``semistatic evaluate``; print the scores and write the sweep (if any)."""
+    if args.every < 1:
+        raise SpecError(COMMAND_LINE, "--every", f"{args.every}: must be an integer >= 1")
+    sweep = _tolerances(args.sweep)
+    if not args.log.exists():
+        raise SpecError(str(args.log), "<file>", "no such file or directory")
+    try:
+        scans = list(itertools.islice(open_log(args.log), 0, None, args.every))
+    except ValueError as error:  # LogFormatError, BagError
+        raise SpecError(str(args.log), "<file>", str(error)) from None
+    sigma = estimate_range_noise(scans[:NOISE_SCANS], REPLAY_PARAMS.max_range)
+    params = noise_params(REPLAY_PARAMS, sigma)
+    name = args.log.name.split(".")[0]
+    print(f"{name}: {len(scans)} scans (one in {args.every}), range noise "
+          f"{100 * sigma:.2f} cm, tolerance {100 * params.epsilon:.2f} cm")
+    for method, points in tolerance_sweep(scans, params, [params.epsilon]).items():
+        print("  " + score_row(method, *points[0]))
+    if not sweep:
+        return 0
+    curves = tolerance_sweep(scans, params, sweep)
+    for method, points in curves.items():
+        for epsilon, score in points:
+            print("  " + score_row(method, epsilon, score))
+    out = args.out if args.out is not None else Path("results") / f"evaluate-{name}"
+    table = {
+        method: [
+            {"epsilon_m": epsilon, "rmse_m": score.rmse, "coverage": score.coverage,
+             "vertices_per_scan": score.vertices_per_scan}
+            for epsilon, score in points
+        ]
+        for method, points in curves.items()
+    }
+
+    def fill(staging: Path) -> None:
+        (staging / "evaluation.json").write_text(json.dumps(
+            {"log": name, "every": args.every, "noise_sigma_m": sigma,
+             "default_epsilon_m": params.epsilon, "curves": table}, indent=2))
+        _plot(staging / "figures" / "rmse_vertices.png", name, table)
+
+    stage_and_publish(out, fill)
+    print(f"results in {out}/ (evaluation.json, figures/rmse_vertices.png)")
+    return 0
+
+
+def _plot(path: Path, name: str, table: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure, axes = plt.subplots(figsize=(5.5, 4.0))
+    for method in EXTRACTORS:
+        points = table.get(method, [])
+        axes.plot([p["vertices_per_scan"] for p in points],
+                  [100 * p["rmse_m"] for p in points], marker="o", label=method)
+    axes.set_xlabel("vertices per scan")
+    axes.set_ylabel("ray-wise RMSE (cm)")
+    axes.set_title(f"{name}: RMSE against vertices per scan")
+    axes.grid(alpha=0.3)
+    axes.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
