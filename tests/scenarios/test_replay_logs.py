@@ -31,7 +31,9 @@ def test_alignment_lowers_the_revisit_distance(summary):
     aligned = metrics["table1_cm"]["mean"]["avg"]
     at_log_pose = metrics["alignment"]["table1_cm_log_pose"]["mean"]["avg"]
     assert aligned < at_log_pose - 0.3
-    assert metrics["alignment"]["accepted"] >= 0.6 * metrics["alignment"]["attempted"]
+    # ACES 86/152 since its tolerance follows its noise (5 cm: coarser reference polylines,
+    # fewer points within the Cauchy scale), 104/152 with the fixed 3 cm.
+    assert metrics["alignment"]["accepted"] >= 0.55 * metrics["alignment"]["attempted"]
     # Corrections of a few centimetres, nowhere near the bounds.
     assert 1.0 < metrics["alignment"]["translation_cm"]["median"] < 5.0
     assert metrics["alignment"]["rotation_deg"]["median"] < 1.0
@@ -40,10 +42,12 @@ def test_alignment_lowers_the_revisit_distance(summary):
 def test_revisit_consistency_figures(summary):
     log, metrics = summary
     aligned = metrics["table1_cm"]["mean"]["avg"]
+    # Issue 10's lines are 4.3 (intel) and 4.5 cm (aces), every polyline under 10 cm: not
+    # met yet (4.49 and 4.69 cm; one 5-sample ACES clutter polyline at 10.4 cm). These pin
+    # the figures against regressions; the paper's real environments: 2.5-4.6 cm.
     if log == "intel":
-        assert aligned < 5.0  # the issue's line; the paper's real environments: 2.5-4.6 cm
+        assert aligned < 4.7
     else:
-        # ACES is not under 5 cm: its first-pass scans are already 6.0 cm from the reference
-        # they built (range noise ~4x intel's, 2.5 cm range quantisation, cluttered).
-        assert 5.5 < aligned < 6.6
+        # ACES: range noise ~3.5x intel's, 2.5 cm range quantisation, cluttered.
+        assert 4.4 < aligned < 5.0
     assert metrics["extraction"]["coverage"] > 0.95
