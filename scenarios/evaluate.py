@@ -36,7 +36,15 @@ COMMAND_LINE = "<command line>"
 
 
 def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``semistatic evaluate`` on the subparsers ``commands``; return its parser."""
+    """Register ``semistatic evaluate`` on the subparsers ``commands``; return its parser.
+
+    Examples
+    --------
+    >>> parser = argparse.ArgumentParser(prog="semistatic")
+    >>> evaluate = add_parser(parser.add_subparsers(dest="command"))
+    >>> parser.parse_args(["evaluate", "aces.log.gz", "--every", "2"]).every
+    2
+    """
     evaluate = commands.add_parser(
         "evaluate", help="score polyline extraction on a real log (PLE's ray-wise RMSE)"
     )
@@ -80,7 +88,18 @@ def _tolerances(text: str | None) -> list[float]:
 
 
 def main_evaluate(args: argparse.Namespace) -> int:
-    """Run ``semistatic evaluate``; print the scores and write the sweep (if any)."""
+    """Run ``semistatic evaluate``; print the scores and write the sweep (if any).
+
+    Bad input raises :class:`~worlds.errors.SpecError` (the CLI prints it, exit 2).
+
+    Examples
+    --------
+    >>> main_evaluate(argparse.Namespace(log=Path("missing.log"), every=5, sweep=None,
+    ...                                  out=None))
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: missing.log: <file>: no such file or directory
+    """
     if args.every < 1:
         raise SpecError(COMMAND_LINE, "--every", f"{args.every}: must be an integer >= 1")
     sweep = _tolerances(args.sweep)
