@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test run bench accuracy lint clean
+.PHONY: install test run bench accuracy fuzz lint clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -32,6 +32,10 @@ bench: install
 
 accuracy: install
 	$(PY) -m pytest -q -m accuracy tests/scenarios/test_accuracy.py
+
+# Fuzzed scenario files, each accepted one run for a short lap (minutes; not in make test).
+fuzz: install
+	$(PY) -m pytest -q -m fuzz tests/scenarios/test_fuzz.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache .hypothesis

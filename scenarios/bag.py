@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Literal
 
 from robots.presets import UGVSpec
+from scenarios.output_dir import check_writable_parent
 from scenarios.runner import ScanRecord
 from semistatic.logs.rosbag import (
     EKF_TOPIC,
@@ -169,6 +170,7 @@ def check_new_bag_path(path: str | os.PathLike[str], *, out: Path | None = None)
             f"{path}: --bag: the parent directory {path.parent} does not exist; create it "
             "first (the bag directory itself must not exist)"
         )
+    check_writable_parent(path, option="--bag")
     return path
 
 

@@ -1,31 +1,39 @@
 """The ``semistatic`` command line (a contract: DESIGN.md "Command line").
 
-Bad input (a missing or malformed file, an unknown key, an out-of-range value) ends with
-exit status 2 and one line ``error: <file>: <key>: <what is wrong>``, before anything is
-written.
+Bad input (a missing or malformed file, an unknown key, an out-of-range value, an option
+out of range, an output directory that cannot be created) ends with exit status 2 and one
+line ``error: <file or option>: <key>: <what is wrong>``, before any work starts and
+before anything is written. ``semistatic check`` runs that validation alone. A run whose
+lap cannot complete exits with status 1; Ctrl-C exits with status 130 and one line.
 """
 
 from __future__ import annotations
 
 import argparse
-import concurrent.futures
-import contextlib
 import dataclasses
+import importlib.metadata
+import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-
-from tqdm import tqdm
 
 from scenarios.evaluate import add_parser as add_evaluate_parser
 from scenarios.evaluate import main_evaluate
+from scenarios.output_dir import check_output_dir, stage_and_publish
+from scenarios.progress import count_progress, scan_progress, sim_progress
 from scenarios.tune import add_parser as add_tune_parser
 from scenarios.tune import main_tune
 from worlds.errors import SpecError
+from worlds.validation import Range, as_float, as_int
 
 __all__ = ["main"]
 
 EXIT_BAD_INPUT = 2
+EXIT_RUN_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+MAX_JOBS = 256
+"""More worker processes than this is a typo, not a machine."""
 
 # scenarios.bag.BAG_STORAGES, spelled out so that --help does not import rosbags.
 BAG_STORAGE_CHOICES = ("sqlite3", "mcap")
@@ -40,7 +48,21 @@ def _parser() -> argparse.ArgumentParser:
         prog="semistatic",
         description="Semi-static object detection with polygonal maps: a PyBullet testbench.",
     )
+    parser.add_argument("--version", action="version",
+                        version=f"%(prog)s {importlib.metadata.version('semistatic')}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    check = commands.add_parser(
+        "check", help="validate a scenario (files, every lap's layout, options) and stop",
+    )
+    check.add_argument("scenario", help="bundled name (sim1, sim2, pal1, pal3a, pal3b) or a .toml")
+    check.add_argument("--laps", type=int, help="number of laps (overrides the file)")
+    check.add_argument("--seed", type=int, help="random seed (overrides the file)")
+    check.add_argument("--out", type=Path, help="also check this output directory")
+    check.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a scenario value, e.g. --set mapper.gate=0.15",
+    )
 
     run = commands.add_parser("run", help="run one scenario headless and write its results")
     run.add_argument("scenario", help="bundled name (sim1, sim2, pal1, pal3a, pal3b) or a .toml")
@@ -104,32 +126,25 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-@contextlib.contextmanager
-def _progress(total: float, label: str) -> Iterator[Callable[[float], None] | None]:
-    """Yield a callback advancing a progress bar in simulated seconds (terminal only)."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    with tqdm(total=round(total, 1), desc=label, unit="sim s", leave=False,
-              bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} sim s "
-                         "[{elapsed}<{remaining}]") as bar:
-        pending = [0.0]
+def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
+          seed: int | None = None):
+    """Load and validate a scenario (every lap's layout included) before anything runs.
 
-        def advance(seconds: float) -> None:
-            pending[0] += seconds
-            if pending[0] >= 0.5:
-                bar.update(min(pending[0], bar.total - bar.n))
-                pending[0] = 0.0
-
-        yield advance
-
-
-def _load(scenario: str, overrides: Sequence[str]):
-    """Load and validate a scenario (every lap's layout included) before anything runs."""
+    ``--laps`` and ``--seed`` are applied as overrides; an error in them names the option.
+    """
     from scenarios.layout import scenario_world
-    from scenarios.load import load_scenario
+    from scenarios.load import OVERRIDE_FILE, load_scenario
 
-    spec = load_scenario(scenario, overrides=overrides)
+    options = [(option, key, value) for option, key, value in
+               (("--laps", "laps", laps), ("--seed", "seed", seed)) if value is not None]
+    texts = [*overrides, *(f"{key}={value}" for _, key, value in options)]
+    try:
+        spec = load_scenario(scenario, overrides=texts)
+    except SpecError as error:
+        for option, key, _ in options:
+            if error.file == OVERRIDE_FILE and error.key == key:
+                raise SpecError(option, key, error.message) from None
+        raise
     return spec, scenario_world(spec)
 
 
@@ -139,18 +154,49 @@ def _estimated_sim_time(spec, world) -> float:
     return spec.laps * SplinePath(world.path.knots).length / world.path.speed
 
 
+def _check_jobs(jobs: int) -> None:
+    as_int(jobs, file="--jobs", key="jobs", valid=Range(ge=1, le=MAX_JOBS))
+
+
+def _check_display(gui: bool) -> None:
+    """Refuse ``--gui`` without a display before PyBullet tries (and dies silently)."""
+    if gui and sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        raise SpecError("--gui", "DISPLAY", "no display to open the PyBullet GUI on (DISPLAY "
+                        "is not set); run without --gui or set DISPLAY")
+
+
+def _check(args: argparse.Namespace) -> int:
+    from robots.path import SplinePath
+    from scenarios.layout import lap_worlds
+
+    spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
+    if args.out is not None:
+        check_output_dir(args.out)
+    boxes = [len(lap.boxes) for lap in lap_worlds(spec)]
+    length = SplinePath(world.path.knots).length
+    print(
+        f"{spec.name}: valid ({spec.source})\n"
+        f"  world {world.name}: {len(world.walls)} walls, {len(world.posts)} posts, "
+        f"path {length:.2f} m in {len(world.path.segments)} segments at "
+        f"{world.path.speed:g} m/s\n"
+        f"  robot {spec.robot}, {spec.laps} laps, seed {spec.seed}, policy {spec.policy}, "
+        f"{len(spec.moves)} box moves; boxes per lap: {boxes}\n"
+        f"  every lap's layout passes the checks (posts in view, boxes clear of walls, "
+        f"the path and the protective fields)"
+    )
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from scenarios.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.outputs import summarize, write_outputs
     from scenarios.runner import run_scenario
 
-    overrides = list(args.overrides)
-    if args.laps is not None:
-        overrides.append(f"laps={args.laps}")
-    if args.seed is not None:
-        overrides.append(f"seed={args.seed}")
-    spec, world = _load(args.scenario, overrides)
-    out = args.out if args.out is not None else Path("results") / spec.name
+    spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
+    out = check_output_dir(args.out if args.out is not None else Path("results") / spec.name)
+    _check_display(args.gui)
     recorder = None
     if args.bag is not None:
         try:
@@ -158,13 +204,14 @@ def _run(args: argparse.Namespace) -> int:
         except ValueError as error:
             raise InputError(str(error)) from None
         recorder = BagRecorder()
-    with _progress(_estimated_sim_time(spec, world), f"{spec.name} ({spec.policy})") as bar:
+    total = _estimated_sim_time(spec, world)
+    with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
         log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder)
     comparison = None
     if args.compare:
         other = "adaptive" if spec.policy == "conservative" else "conservative"
         other_spec = dataclasses.replace(spec, policy=other)
-        with _progress(_estimated_sim_time(spec, world), f"{spec.name} ({other})") as bar:
+        with sim_progress(total, f"{spec.name} ({other})", spec.laps) as bar:
             other_log = run_scenario(other_spec, progress=bar)
         comparison = summarize(other_log)
     metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison)
@@ -177,6 +224,13 @@ def _run(args: argparse.Namespace) -> int:
             f"topics {', '.join(BAG_TOPICS)})"
         )
     print(summary)
+    failures = metrics["safety"]["failed_laps"]
+    if failures:
+        first = failures[0]
+        more = f" (and {len(failures) - 1} more lap(s))" if len(failures) > 1 else ""
+        print(f"run failed: lap {first['lap']}: {first['reason']}{more}; results in {out}/ "
+              "record it (metrics.json safety.failed_laps)", file=sys.stderr)
+        return EXIT_RUN_FAILED
     return 0
 
 
@@ -188,10 +242,25 @@ def _run_summary(metrics: dict, out: Path) -> str:
     lines = [
         f"{metrics['scenario']}: {metrics['laps']} laps, policy {metrics['policy']}, "
         f"seed {metrics['seed']}",
-        f"  Table 1 mean restricted Hausdorff (cm): avg {table['avg']} min {table['min']} "
-        f"max {table['max']}",
-        f"  detection: precision {detection['precision']:.3f} recall {detection['recall']:.3f} "
-        f"F1 {detection['f1']:.3f}, objects from people {detection['false_objects_from_people']}",
+    ]
+    if metrics["laps"] < 2:
+        lines.append("  Table 1 needs at least 2 laps (later laps against the lap-1 maps); "
+                     "run with --laps 2 or more")
+    elif table["avg"] is None:
+        lines.append("  Table 1: no later-lap polyline was associated with a lap-1 map")
+    else:
+        lines.append(f"  Table 1 mean restricted Hausdorff (cm): avg {table['avg']} "
+                     f"min {table['min']} max {table['max']}")
+    if safety["failed_laps"]:
+        lines.append(f"  detection: not scored, {len(safety['failed_laps'])} lap(s) did not "
+                     "complete")
+    else:
+        lines.append(
+            f"  detection: precision {detection['precision']:.3f} recall "
+            f"{detection['recall']:.3f} F1 {detection['f1']:.3f}, objects from people "
+            f"{detection['false_objects_from_people']}"
+        )
+    lines += [
         f"  localization RMSE {metrics['localization']['rmse_xy_m']} m, "
         f"NEES {metrics['localization']['nees_mean']}",
         f"  safety: {safety['collisions']} collisions, {safety['stops']} stops, "
@@ -212,69 +281,77 @@ def _run_summary(metrics: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
-def _table_job(name: str, laps: int | None, out: Path, figures: bool, compare: bool) -> dict:
+def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dict]:
+    """Run one bundled scenario (in a worker) and write its folder into the staging dir."""
     from scenarios.outputs import summarize, write_outputs
     from scenarios.runner import run_scenario
 
-    overrides = [f"laps={laps}"] if laps is not None else []
-    spec, _ = _load(name, overrides)
+    name, laps, staging, figures, compare = task
+    spec, _ = _load(name, [], laps)
     comparison = None
     if compare:
         other = "adaptive" if spec.policy == "conservative" else "conservative"
         comparison = summarize(run_scenario(dataclasses.replace(spec, policy=other)))
-    return write_outputs(run_scenario(spec), out / name, figures=figures, comparison=comparison)
+    metrics = write_outputs(run_scenario(spec), staging / name, figures=figures,
+                            comparison=comparison)
+    return name, metrics
 
 
 def _table(args: argparse.Namespace) -> int:
     from scenarios.load import bundled_scenarios
     from scenarios.table import render_table, write_table
+    from scenarios.workers import worker_pool
 
     names = bundled_scenarios()
-    overrides = [f"laps={args.laps}"] if args.laps is not None else []
+    _check_jobs(args.jobs)
     for name in names:
-        _load(name, overrides)  # fail fast on bad input, before any run
-    if args.jobs < 1:
-        raise InputError(f"--jobs: must be >= 1, got {args.jobs}")
+        _load(name, [], args.laps)  # fail fast on bad input, before any run
+    out = check_output_dir(args.out)
     results: dict[str, dict] = {}
-    with concurrent.futures.ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {
-            pool.submit(
-                _table_job, name, args.laps, args.out, not args.no_figures, args.compare
-            ): name
-            for name in names
-        }
-        done = concurrent.futures.as_completed(futures)
-        for future in tqdm(done, total=len(futures), desc="scenarios",
-                           disable=not sys.stderr.isatty()):
-            results[futures[future]] = future.result()
+
+    def fill(staging: Path) -> None:
+        # The whole table is staged: an interrupted table leaves the previous one intact.
+        tasks = [(name, args.laps, staging, not args.no_figures, args.compare) for name in names]
+        with count_progress(len(names), "table", "scenario") as advance:
+            if args.jobs == 1:
+                outcomes = map(_table_job, tasks)
+                for name, metrics in outcomes:
+                    results[name] = metrics
+                    advance(name)
+            else:
+                with worker_pool(min(args.jobs, len(names))) as pool:
+                    for name, metrics in pool.imap_unordered(_table_job, tasks):
+                        results[name] = metrics
+                        advance(name)
+        write_table({name: results[name] for name in names}, staging)
+
+    stage_and_publish(out, fill)
     ordered = {name: results[name] for name in names}
-    write_table(ordered, args.out)
     print(render_table(ordered))
-    print(f"results in {args.out}/ (table1.csv, table1.md, one folder per scenario)")
+    print(f"results in {out}/ (table1.csv, table1.md, one folder per scenario)")
+    failed = [name for name, metrics in ordered.items() if metrics["safety"]["failed_laps"]]
+    if failed:
+        print(f"run failed: some laps did not complete in {', '.join(failed)} "
+              "(metrics.json safety.failed_laps)", file=sys.stderr)
+        return EXIT_RUN_FAILED
     return 0
 
 
 def _replay_params(overrides: Sequence[str], max_range: float | None):
-    from scenarios.load import OVERRIDE_FILE, parse_override
+    from scenarios.load import OVERRIDE_FILE, mapper_from_table, parse_override
     from scenarios.replay import REPLAY_PARAMS
-    from worlds.validation import did_you_mean
 
-    params = REPLAY_PARAMS
-    fields = set(dataclasses.asdict(params))
-    changes: dict[str, object] = {}
+    table = {}
     for text in overrides:
         path, value = parse_override(text)
-        dotted = ".".join(path)
-        if len(path) != 2 or path[0] != "mapper" or path[1] not in fields:
-            hint = did_you_mean(path[-1], fields) if len(path) == 2 else ""
-            raise SpecError(OVERRIDE_FILE, dotted, f"replay takes mapper.KEY=VALUE{hint}")
-        changes[path[1]] = value
+        if len(path) != 2 or path[0] != "mapper":
+            raise SpecError(OVERRIDE_FILE, ".".join(path), "replay takes mapper.KEY=VALUE")
+        table[path[1]] = value
+    params = mapper_from_table(table, file=OVERRIDE_FILE, base=REPLAY_PARAMS)
     if max_range is not None:
-        changes["max_range"] = max_range
-    try:
-        return params.replace(**changes)
-    except (ValueError, TypeError) as error:
-        raise InputError(f"{OVERRIDE_FILE}: {error}") from None
+        params = mapper_from_table({"max_range": max_range}, file="--max-range", key="",
+                                   base=params)
+    return params
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -282,21 +359,25 @@ def _replay(args: argparse.Namespace) -> int:
     from semistatic.logs import LogFormatError
 
     params = _replay_params(args.overrides, args.max_range)
-    try:
-        options = ReplayOptions(params=params, every=args.every, tile_size=args.tile,
-                                align=args.align, auto_noise=args.auto_noise)
-    except ValueError as error:
-        raise InputError(str(error)) from None
+    every = as_int(args.every, file="--every", key="every", valid=Range(ge=1, le=100_000))
+    tile = as_float(args.tile, file="--tile", key="tile", valid=Range(ge=1.0, le=1000.0))
+    options = ReplayOptions(params=params, every=every, tile_size=tile,
+                            align=args.align, auto_noise=args.auto_noise)
     if not args.log.exists():
         raise InputError(f"{args.log}: <file>: no such file or directory")
     name = args.log.name.split(".")[0]
-    out = args.out if args.out is not None else Path("results") / f"replay-{name}"
+    out = check_output_dir(args.out if args.out is not None else Path("results") / f"replay-{name}")
     try:
-        with tqdm(desc=name, unit="scan", disable=not sys.stderr.isatty(), leave=False) as bar:
+        with scan_progress(f"replay {name}") as advance:
             result = replay(open_log(args.log, lenient=args.lenient), options,
-                            progress=bar.update)
+                            progress=advance)
     except (LogFormatError, ValueError) as error:
         raise InputError(str(error)) from None
+    if result.quality is not None and result.quality.vertices_per_scan == 0.0:
+        raise InputError(
+            f"{args.log}: <file>: no polyline in any of its {result.scans} scans (are all "
+            "ranges NaN, inf or beyond --max-range?); nothing to map"
+        )
     metrics = write_replay_outputs(result, out, log_name=name, figures=not args.no_figures)
     table, quality = metrics["table1_cm"], metrics["extraction"]
     alignment = metrics["alignment"]
@@ -327,18 +408,27 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``semistatic`` command line; return the exit status."""
+    """Run the ``semistatic`` command line; return the exit status.
+
+    Examples
+    --------
+    >>> main(["check", "pal1"])  # doctest: +ELLIPSIS
+    pal1: valid (...pal1.toml)
+    ...
+    0
+    """
     args = _parser().parse_args(argv)
-    handlers = {"run": _run, "table": _table, "replay": _replay, "tune": main_tune,
-                "evaluate": main_evaluate}
+    handlers = {"check": _check, "run": _run, "table": _table, "replay": _replay,
+                "tune": main_tune, "evaluate": main_evaluate}
     try:
         return handlers[args.command](args)
     except (SpecError, InputError) as error:
-        print(f"error: {error}", file=sys.stderr)
+        # One line, whatever a library put into the message.
+        print("error: " + " ".join(str(error).split()), file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        print("interrupted; earlier results are left as they were", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import itertools
 import json
 from pathlib import Path
 
-from scenarios.outputs import stage_and_publish
+from scenarios.output_dir import check_output_dir, stage_and_publish
 from scenarios.replay import NOISE_SCANS, REPLAY_PARAMS, open_log
 from semistatic.evaluation import EXTRACTORS, RayScore, tolerance_sweep
 from semistatic.noise import estimate_range_noise, noise_params
@@ -105,13 +105,16 @@ def main_evaluate(args: argparse.Namespace) -> int:
     sweep = _tolerances(args.sweep)
     if not args.log.exists():
         raise SpecError(str(args.log), "<file>", "no such file or directory")
+    name = args.log.name.split(".")[0]
+    # Checked before the work, as every command does: a bad --out costs no scoring.
+    out = check_output_dir(
+        args.out if args.out is not None else Path("results") / f"evaluate-{name}")
     try:
         scans = list(itertools.islice(open_log(args.log), 0, None, args.every))
     except ValueError as error:  # LogFormatError, BagError
         raise SpecError(str(args.log), "<file>", str(error)) from None
     sigma = estimate_range_noise(scans[:NOISE_SCANS], REPLAY_PARAMS.max_range)
     params = noise_params(REPLAY_PARAMS, sigma)
-    name = args.log.name.split(".")[0]
     print(f"{name}: {len(scans)} scans (one in {args.every}), range noise "
           f"{100 * sigma:.2f} cm, tolerance {100 * params.epsilon:.2f} cm")
     for method, points in tolerance_sweep(scans, params, [params.epsilon]).items():
@@ -122,7 +125,6 @@ def main_evaluate(args: argparse.Namespace) -> int:
     for method, points in curves.items():
         for epsilon, score in points:
             print("  " + score_row(method, epsilon, score))
-    out = args.out if args.out is not None else Path("results") / f"evaluate-{name}"
     table = {
         method: [
             {"epsilon_m": epsilon, "rmse_m": score.rmse, "coverage": score.coverage,

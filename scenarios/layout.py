@@ -44,6 +44,7 @@ from worlds.spec import BoxSpec, WorldSpec
 from worlds.validation import FILE_KEY, did_you_mean
 
 __all__ = [
+    "check_first_lap",
     "check_moves",
     "check_scenario_layout",
     "enable_people",
@@ -52,6 +53,10 @@ __all__ = [
     "scenario_world",
     "world_for_lap",
 ]
+
+
+FIRST_LAP_ORDER = ("solids", "people", "footprint", "protective", "posts", "warning", "static")
+"""Which problem of a lap-1 layout is reported first: what cannot stand before the rest."""
 
 
 def _in_lap_order(moves: Sequence[BoxMove], lap: int) -> list[tuple[int, BoxMove]]:
@@ -253,6 +258,51 @@ def _blamed(
     return blamed
 
 
+def _world_key(world: WorldSpec, problem: LayoutProblem) -> str:
+    """Return the key in the world file of what ``problem`` is about (``boxes[1]``, ...)."""
+    for kind, items in (("boxes", world.boxes), ("people", world.people)):
+        label = "box" if kind == "boxes" else "person"
+        for index, item in enumerate(items):
+            if problem.subject == f"{label} {item.name!r}":
+                return f"{kind}[{index}]"
+    if problem.check == "posts":
+        return "posts"
+    return problem.subject if problem.subject.startswith(("walls[", "posts[")) else "path"
+
+
+def check_first_lap(
+    world: WorldSpec,
+    *,
+    footprint: np.ndarray,
+    clearances: Clearances | None = None,
+) -> None:
+    """Raise :class:`SpecError` in the world's file if its lap-1 layout is no testbench.
+
+    Lap 1 is the world as written (with the scenario's people): too few posts to
+    triangulate from every path pose, a box on a wall, in a protective field or on the
+    swept footprint fail here, before any simulation. The problem reported first is the
+    most physical one (``FIRST_LAP_ORDER``).
+
+    Examples
+    --------
+    >>> from worlds.checks import PIONEER_FOOTPRINT
+    >>> from worlds.load import load_world
+    >>> world = load_world("sim1")
+    >>> check_first_lap(world, footprint=PIONEER_FOOTPRINT)
+    >>> few_posts = dataclasses.replace(world, posts=world.posts[:2])
+    >>> check_first_lap(few_posts, footprint=PIONEER_FOOTPRINT)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: ...sim1.toml: posts: lap 1: path: ... pose(s) see fewer than 3 posts...
+    """
+    problems = layout_problems(world, footprint=footprint, clearances=clearances)
+    problems.sort(key=lambda problem: FIRST_LAP_ORDER.index(problem.check))
+    if problems:
+        first = problems[0]
+        more = f"; and {len(problems) - 1} more problem(s)" if len(problems) > 1 else ""
+        raise SpecError(world.source, _world_key(world, first), f"lap 1: {first}{more}")
+
+
 def check_moves(
     world: WorldSpec,
     moves: Sequence[BoxMove],
@@ -299,7 +349,10 @@ def check_scenario_layout(
     moves: Sequence[BoxMove] | None = None,
     clearances: Clearances | None = None,
 ) -> None:
-    """Check a scenario's world, robot, people and box moves; raise :class:`SpecError`.
+    """Check a scenario's world, robot, people and every lap's layout; raise :class:`SpecError`.
+
+    Lap 1 is checked as it stands (:func:`check_first_lap`), later laps against the lap
+    before them (:func:`check_moves`).
 
     ``moves`` defaults to ``spec.moves``; the loader passes the file's moves when a
     ``--set laps=N`` dropped the later ones, so the whole file is checked.
@@ -317,6 +370,7 @@ and no such file; bundled worlds: pal1, pal3, sim1, sim2
     """
     footprint = robot_footprint(spec.robot, file=spec.source)
     world = scenario_world(spec)
+    check_first_lap(world, footprint=footprint, clearances=clearances)
     check_moves(
         world,
         spec.moves if moves is None else moves,

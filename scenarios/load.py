@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import tomllib
 import typing
 from collections.abc import Iterable, Iterator, Mapping
@@ -27,6 +28,7 @@ from semistatic.params import MapperParams
 from worlds.errors import SpecError, join_key
 from worlds.validation import (
     FILE_KEY,
+    Range,
     as_table,
     convert,
     did_you_mean,
@@ -37,9 +39,11 @@ from worlds.validation import (
 
 __all__ = [
     "DATA_DIR",
+    "MAPPER_BOUNDS",
     "OVERRIDE_FILE",
     "bundled_scenarios",
     "load_scenario",
+    "mapper_from_table",
     "parse_override",
     "scenario_from_toml",
     "scenario_path",
@@ -50,6 +54,23 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 
 OVERRIDE_FILE = "--set"
 """The ``file`` named in errors about command-line overrides."""
+
+
+MAPPER_BOUNDS = {
+    "outlier_k": Range(ge=1, le=50),
+    "outlier_alpha": Range(gt=0.0, le=100.0),
+    "breakpoint_lambda": Range(gt=0.0, lt=round(math.pi / 2, 4)),
+    "breakpoint_sigma_r": Range(ge=0.0, le=1.0),
+    "min_points": Range(ge=2, le=1000),
+    "epsilon": Range(gt=0.0, le=1.0),
+    "max_range": Range(gt=0.0, le=100.0),
+    "gate": Range(gt=0.0, le=5.0),
+    "miss_limit": Range(ge=1, le=1000),
+    "visibility_margin": Range(ge=0.0, le=10.0),
+}
+"""Physical bounds of the mapper thresholds in files and options (m, rad, counts): a
+laser reaches at most 100 m, a polyline tolerance beyond 1 m or a gate beyond 5 m maps
+nothing real. :class:`MapperParams` itself checks only what the algorithms need."""
 
 
 def bundled_scenarios() -> tuple[str, ...]:
@@ -83,6 +104,8 @@ and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2
     path = Path(name_or_path)
     if path.is_file():
         return path
+    if path.is_dir():
+        raise SpecError(text, FILE_KEY, "is a directory, expected a scenario .toml file")
     if path.suffix == "" and "/" not in text:
         raise SpecError(
             text,
@@ -177,22 +200,43 @@ def _blame_overrides(file: str, keys: Iterable[str]) -> Iterator[None]:
         raise
 
 
-def _mapper_from_table(value: Any, *, file: str) -> MapperParams:
-    """Build :class:`MapperParams` from the ``[mapper]`` table (its own validation)."""
-    table = as_table(value, file=file, key="mapper")
+def mapper_from_table(
+    value: Any, *, file: str, key: str = "mapper", base: MapperParams | None = None
+) -> MapperParams:
+    """Return ``base`` (default :class:`MapperParams`) with the table's thresholds set.
+
+    Every key is checked (unknown keys with a suggestion, types) and then the mapper's
+    own rules; errors name ``file`` and the key inside the table at ``key``.
+
+    Examples
+    --------
+    >>> mapper_from_table({"gate": 0.2}, file="--set").gate
+    0.2
+    >>> mapper_from_table({"gate": "abc"}, file="--set")
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: --set: mapper.gate: expected a number, got a string 'abc'
+    >>> mapper_from_table({"max_range": -1.0}, file="--max-range", key="")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0
+    """
+    table = as_table(value, file=file, key=key)
     keys = _known_keys(MapperParams)
-    reject_unknown_keys(table, keys, file=file, key="mapper")
+    reject_unknown_keys(table, keys, file=file, key=key)
     kwargs = {}
     for name, raw in table.items():
         hint = keys[name]
         if typing.get_origin(hint) is typing.Literal:
             hint = str
-        kwargs[name] = convert(hint, raw, file=file, key=join_key("mapper", name))
+        kwargs[name] = convert(hint, raw, file=file, key=join_key(key, name),
+                               valid=MAPPER_BOUNDS.get(name))
     try:
-        return MapperParams(**kwargs)
+        return (base or MapperParams()).replace(**kwargs)
     except ValueError as error:
         name = str(error).split(" ", 1)[0].removeprefix("MapperParams.")
-        raise SpecError(file, join_key("mapper", name), str(error)) from None
+        message = str(error).removeprefix(f"MapperParams.{name} ")
+        raise SpecError(file, join_key(key, name), message) from None
 
 
 def scenario_from_toml(
@@ -244,7 +288,7 @@ def scenario_from_toml(
 def _spec_from_table(table: Mapping[str, Any], *, file: str) -> ScenarioSpec:
     """Build the spec from a table whose ``name`` and ``world`` are already resolved."""
     table = dict(table)
-    mapper = _mapper_from_table(table.pop("mapper", {}), file=file)
+    mapper = mapper_from_table(table.pop("mapper", {}), file=file)
     return from_table(
         ScenarioSpec, table, file=file, key="", fixed={"source": file, "mapper": mapper}
     )

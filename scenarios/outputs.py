@@ -7,8 +7,8 @@
     DIR/maps/lap_NN.geojson   the local maps after lap NN, world frame
     DIR/figures/*.png         Fig. 4 map, Fig. 5 EKF corrections, Fig. 2 tangent histograms, ...
 
-Nothing is half-written: every file is first written to a staging folder beside ``DIR``
-and moved in only when all of them exist.
+Nothing is half-written: every file is first written to a staging folder beside ``DIR``,
+which then replaces ``DIR`` as a whole (:mod:`scenarios.output_dir`).
 """
 
 from __future__ import annotations
@@ -17,9 +17,7 @@ import csv
 import io
 import json
 import os
-import shutil
-import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,12 +31,14 @@ from scenarios.figures import (
     plot_tangent_histograms,
 )
 from scenarios.metrics import detection_scores, localization_metrics, table1_cm
+from scenarios.output_dir import stage_and_publish
 from scenarios.runner import RunLog
 
 __all__ = [
     "PAPER_TABLE1",
     "TABLE1_COLUMNS",
     "csv_text",
+    "failed_laps",
     "json_text",
     "policy_comparison",
     "stage_and_publish",
@@ -104,6 +104,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "stopped_time_s": [round(lap.stopped_time_s, 4) for lap in laps],
             "slowed_time_s": [round(lap.slowed_time_s, 4) for lap in laps],
             "laps_completed": sum(lap.completed for lap in laps),
+            "failed_laps": failed_laps(log),
         },
         "performance": {
             "sim_time_s": round(log.sim_time_s, 3),
@@ -116,6 +117,25 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "safety_scans": len(log.mapper_seconds),
         },
     }
+
+
+def failed_laps(log: RunLog) -> list[dict[str, Any]]:
+    """Return ``{"lap", "reason"}`` for every lap that did not reach the end of the path.
+
+    The runner ends a lap at the end of the path or when ``lap_timeout`` simulated
+    seconds have passed (the robot stopped for good, lost or stuck); a lap that never
+    started (the run ended early) counts as failed too.
+    """
+    spec = log.spec
+    failed = [
+        {"lap": lap.lap,
+         "reason": f"did not reach the end of the path within lap_timeout = "
+                   f"{spec.lap_timeout:g} s ({lap.stops} stops, {lap.collisions} collisions)"}
+        for lap in log.laps if not lap.completed
+    ]
+    failed += [{"lap": lap, "reason": "never ran"}
+               for lap in range(len(log.laps) + 1, spec.laps + 1)]
+    return failed
 
 
 def policy_comparison(conservative: Mapping[str, Any], adaptive: Mapping[str, Any]) -> dict:
@@ -239,28 +259,3 @@ def write_outputs(
 
     stage_and_publish(Path(out_dir), fill)
     return metrics
-
-
-def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
-    """Let ``fill`` write into a staging folder beside ``out``, then move it all into ``out``.
-
-    If ``fill`` raises, nothing reaches ``out``. Files already in ``out`` are replaced.
-    """
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        fill(staging)
-        _move_into(staging, out)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
-def _move_into(staging: Path, out: Path) -> None:
-    """Move every staged file into ``out`` (created if missing), replacing old ones."""
-    for source in sorted(staging.rglob("*")):
-        target = out / source.relative_to(staging)
-        if source.is_dir():
-            target.mkdir(parents=True, exist_ok=True)
-        else:
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(source, target)

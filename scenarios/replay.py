@@ -87,6 +87,12 @@ NOISE_SCANS = 50
 """Scans at the start of a log on which its range noise is measured (on the Intel and ACES
 logs the first 50 give 0.47 and 1.67 cm, all scans 0.50 and 1.75 cm)."""
 
+
+def _rounded(value: float, digits: int) -> float | None:
+    """Return ``value`` rounded, or None when it is not finite (JSON has no NaN)."""
+    return round(value, digits) if math.isfinite(value) else None
+
+
 REPLAY_PARAMS = MapperParams(
     breakpoint_lambda=math.radians(10.0),
     breakpoint_sigma_r=0.03,
@@ -207,10 +213,11 @@ class ReplayResult:
             "map_polylines": polylines,
             "table1_cm": table1_cm(self.table1_distances),
             "extraction": None if quality is None else {
-                "coverage": round(quality.coverage, 6),
-                "in_span_fraction": round(quality.in_span_fraction, 6),
-                "rms_distance_m": round(quality.rms_distance, 6),
-                "max_distance_m": round(quality.max_distance, 6),
+                # None (JSON null) where no scan had a valid reading to measure.
+                "coverage": _rounded(quality.coverage, 6),
+                "in_span_fraction": _rounded(quality.in_span_fraction, 6),
+                "rms_distance_m": _rounded(quality.rms_distance, 6),
+                "max_distance_m": _rounded(quality.max_distance, 6),
                 "vertices_per_scan": round(quality.vertices_per_scan, 3),
                 "polylines_per_scan": round(quality.polylines_per_scan, 3),
             },

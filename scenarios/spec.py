@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 
 from semistatic.params import MapperParams
 from worlds.errors import MEMORY, SpecError
-from worlds.validation import bounds
+from worlds.spec import BOX_SIZE, COORDINATE
+from worlds.validation import bounds, check_fields, safe_name
 
 __all__ = [
     "BOX_ACTIONS",
@@ -24,6 +25,15 @@ __all__ = [
     "SafetySettings",
     "ScenarioSpec",
 ]
+
+MAX_LAPS = 1000
+"""Laps of one run: 1000 laps of a 10 m path are about 10 km, a few days of driving."""
+
+MAX_SEED = 2**63 - 1
+"""Largest seed (a 64-bit signed integer, what every tool around us can store)."""
+
+MAX_LAP_TIMEOUT = 3600.0
+"""Longest lap timeout (s): a lap of a bundled path takes 25-60 s."""
 
 POLICIES = ("conservative", "adaptive")
 BOX_ACTIONS = ("move", "add", "remove")
@@ -36,6 +46,17 @@ class Rates:
     The defaults follow DESIGN.md: 240 Hz physics, 50 Hz control, a 25 Hz localization laser
     (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300, 80 ms scan time). With the
     ``pioneer3dx`` preset one LMS100 serves both roles; each role then uses its own rate.
+
+    Parameters
+    ----------
+    physics_hz
+        Physics steps per second (Hz); every other rate is scheduled on it.
+    control_hz
+        Follower commands per second (Hz).
+    localization_hz
+        Scans of the localization laser per second (Hz).
+    safety_hz
+        Scans of the safety laser per second (Hz); each also updates the map.
     """
 
     physics_hz: float = field(default=240.0, metadata=bounds(ge=60.0, le=2000.0))
@@ -44,6 +65,7 @@ class Rates:
     safety_hz: float = field(default=12.5, metadata=bounds(gt=0.0, le=100.0))
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("control_hz", "localization_hz", "safety_hz"):
             if getattr(self, name) > self.physics_hz:
                 raise SpecError(
@@ -53,10 +75,21 @@ class Rates:
 
 @dataclass(frozen=True)
 class Noise:
-    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values)."""
+    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values).
+
+    Parameters
+    ----------
+    odometry
+        Factor on the wheel-encoder slip noise (0 = noise-free odometry).
+    range
+        Factor on the lasers' range noise (0 = exact ranges).
+    """
 
     odometry: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
     range: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -70,6 +103,19 @@ class SafetySettings:
     known semi-static object of the current segment no longer count, except inside the
     ``min_protective_depth`` (m) nearest part of the protective field, which is never given
     up.
+
+    Parameters
+    ----------
+    slowdown
+        Speed factor while the warning field is occupied.
+    release_delay
+        Time (s) a reaction lasts after its field clears.
+    min_points
+        Readings that must fall in a field before it counts.
+    adaptive_margin
+        Distance (m) from a known object within which readings no longer count (adaptive).
+    min_protective_depth
+        Depth (m) of the protective field that the adaptive policy never gives up.
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
@@ -78,6 +124,9 @@ class SafetySettings:
     adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
     min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
 
+    def __post_init__(self) -> None:
+        check_fields(self)
+
 
 @dataclass(frozen=True)
 class BoxMove:
@@ -85,15 +134,29 @@ class BoxMove:
 
     ``action`` is ``move`` (needs ``pose``), ``add`` (needs ``pose`` and ``size``) or
     ``remove``. Moves happen while the robot is back at the start, i.e. not observing.
+
+    Parameters
+    ----------
+    lap
+        The lap before which the change happens (2 or later).
+    action
+        ``move``, ``add`` or ``remove``.
+    box
+        Name of the box (a new name for ``add``).
+    pose
+        ``[x, y, yaw]`` of the box centre (m, m, rad), for ``move`` and ``add``.
+    size
+        ``[sx, sy, sz]`` edges of the box (m); required for ``add``, optional for ``move``.
     """
 
-    lap: int = field(metadata=bounds(ge=2))
+    lap: int = field(metadata=bounds(ge=2, le=MAX_LAPS))
     action: str
-    box: str
-    pose: tuple[float, float, float] | None = None
-    size: tuple[float, float, float] | None = field(default=None, metadata=bounds(gt=0.0))
+    box: str = field(metadata=safe_name())
+    pose: tuple[float, float, float] | None = field(default=None, metadata=COORDINATE)
+    size: tuple[float, float, float] | None = field(default=None, metadata=BOX_SIZE)
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.action not in BOX_ACTIONS:
             raise SpecError(MEMORY, "action", f"must be one of {', '.join(BOX_ACTIONS)}")
         if self.action in ("move", "add") and self.pose is None:
@@ -104,17 +167,52 @@ class BoxMove:
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """One experiment. ``world`` is a bundled world name or a path (relative to the file)."""
+    """One experiment. ``world`` is a bundled world name or a path (relative to the file).
 
-    name: str
+    Parameters
+    ----------
+    name
+        Name of the experiment (default: the file's stem); results go to
+        ``results/NAME``, so it is a plain name, not a path.
+    world
+        A bundled world name or a ``.toml`` path, relative to the scenario file.
+    robot
+        Robot preset: ``pioneer3dx`` or ``lgv``.
+    laps
+        Laps to drive.
+    seed
+        Seed of every random stream (noise, people).
+    policy
+        Safety-field policy: ``conservative`` or ``adaptive``.
+    description
+        Free text.
+    people
+        Names of the world's people to switch on.
+    lap_timeout
+        Simulated time (s) after which a lap that has not reached the path end fails.
+    rates
+        Update rates (table ``[rates]``).
+    noise
+        Noise scale factors (table ``[noise]``).
+    safety
+        Safety supervisor and field policy (table ``[safety]``).
+    mapper
+        Mapper thresholds (table ``[mapper]``).
+    moves
+        Box changes between laps (array of tables ``[[moves]]``).
+    source
+        Set by the loader to the file read; not a key of the file.
+    """
+
+    name: str = field(metadata=safe_name())
     world: str
     robot: str = "pioneer3dx"
-    laps: int = field(default=5, metadata=bounds(ge=1, le=1000))
-    seed: int = field(default=0, metadata=bounds(ge=0))
+    laps: int = field(default=5, metadata=bounds(ge=1, le=MAX_LAPS))
+    seed: int = field(default=0, metadata=bounds(ge=0, le=MAX_SEED))
     policy: str = "conservative"
     description: str = ""
     people: tuple[str, ...] = ()
-    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0))
+    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0, le=MAX_LAP_TIMEOUT))
     rates: Rates = field(default_factory=Rates)
     noise: Noise = field(default_factory=Noise)
     safety: SafetySettings = field(default_factory=SafetySettings)
@@ -123,6 +221,7 @@ class ScenarioSpec:
     source: str = MEMORY
 
     def __post_init__(self) -> None:
+        check_fields(self)
         if self.policy not in POLICIES:
             raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")
         for index, move in enumerate(self.moves):

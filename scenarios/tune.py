@@ -30,21 +30,20 @@ mapper.gate=0.12 policy=adaptive seed=0
 from __future__ import annotations
 
 import argparse
-import concurrent.futures
 import contextlib
 import copy
 import itertools
 import math
-import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from scenarios.load import OVERRIDE_FILE, parse_override, scenario_from_toml, scenario_path
+from scenarios.output_dir import check_output_dir
+from scenarios.progress import count_progress
 from scenarios.spec import ScenarioSpec
+from scenarios.workers import worker_pool
 from worlds.errors import SpecError
 from worlds.validation import did_you_mean, read_toml
 
@@ -389,7 +388,7 @@ def sweep_points(
     >>> sweep_points("pal1", {"mapper.gate": [0.1, -0.1]})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --grid: mapper.gate: MapperParams.gate must be > 0 (got -0.1): ...
+    worlds.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1
     """
     grids = {key: tuple(values) for key, values in grids.items()}
     for key, values in grids.items():
@@ -522,12 +521,20 @@ def run_sweep(
         for point in points:
             record(point, _run_point(point.spec))
     else:
-        workers = min(jobs, len(points))
-        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = {pool.submit(_run_point, point.spec): point for point in points}
-            for future in concurrent.futures.as_completed(futures):
-                record(futures[future], future.result())
+        by_index = {point.index: point for point in points}
+        with worker_pool(min(jobs, len(points))) as pool:
+            tasks = [(point.index, point.spec) for point in points]
+            for index, outcome in pool.imap_unordered(_run_indexed_point, tasks):
+                record(by_index[index], outcome)
     return [results[point.index] for point in points]
+
+
+def _run_indexed_point(
+    task: tuple[int, ScenarioSpec],
+) -> tuple[int, tuple[dict[str, Any] | None, str | None]]:
+    """Run one point in a worker; return its index with the outcome."""
+    index, spec = task
+    return index, _run_point(spec)
 
 
 # --------------------------------------------------------------------------------------
@@ -683,7 +690,7 @@ def write_sweep(
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     summary = write_sweep(results, Path(tmp) / "sweep", figures=False)
     ...     sorted(path.name for path in (Path(tmp) / "sweep").iterdir())
-    ['sweep.csv', 'sweep.json']
+    ['.semistatic-result', 'sweep.csv', 'sweep.json']
     >>> summary["best"]["settings"], summary["best"]["table1_mean_avg_cm"]
     ({'mapper.gate': 0.12}, 2.4)
     """
@@ -861,9 +868,10 @@ def main_tune(args: argparse.Namespace) -> int:
     points = sweep_points(args.scenario, grids, seeds=seeds, laps=args.laps,
                           overrides=args.overrides)
     out = args.out if args.out is not None else Path("results") / f"tune-{points[0].spec.name}"
-    with tqdm(total=len(points), desc=f"tune {points[0].spec.name}", unit="run", leave=False,
-              disable=not sys.stderr.isatty()) as bar:
-        results = run_sweep(points, jobs=args.jobs, on_result=lambda _: bar.update(1))
+    check_output_dir(out)
+    with count_progress(len(points), f"tune {points[0].spec.name}", "run") as advance:
+        results = run_sweep(points, jobs=args.jobs,
+                            on_result=lambda result: advance(result.point.label))
     summary = write_sweep(results, out, sort=args.sort, figures=not args.no_figures)
     print(format_ranking(summary, out))
     return 1 if any(result.failed for result in results) else 0

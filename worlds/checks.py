@@ -358,7 +358,7 @@ def _candidate_sight_lines(
     world: WorldSpec, poses: np.ndarray, post_range: float, field_of_view: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Return (pose index, post index) pairs in range and inside the field of view."""
-    posts = np.array([post.xy for post in world.posts])
+    posts = np.array([post.xy for post in world.posts]).reshape(-1, 2)
     offsets = posts[None, :, :] - poses[:, None, :2]
     distance = np.linalg.norm(offsets, axis=2)
     bearing = wrap_angle(np.arctan2(offsets[..., 1], offsets[..., 0]) - poses[:, 2:3])

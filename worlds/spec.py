@@ -29,7 +29,7 @@ Examples
 >>> PostSpec(0.0, 0.0, radius=-1.0)
 Traceback (most recent call last):
 ...
-worlds.errors.SpecError: <memory>: radius: must be > 0.0, got -1.0
+worlds.errors.SpecError: <memory>: radius: must be > 0.0 and <= 2.0, got -1.0
 """
 
 from __future__ import annotations
@@ -43,9 +43,12 @@ import numpy as np
 import shapely
 
 from worlds.errors import MEMORY, SpecError
-from worlds.validation import Range, bounds, did_you_mean
+from worlds.validation import bounds, check_fields, did_you_mean, safe_name
 
 __all__ = [
+    "BOX_SIZE",
+    "COORDINATE",
+    "FIELD_POINT",
     "BoxSpec",
     "PathSpec",
     "PersonSpec",
@@ -63,48 +66,35 @@ MIN_KNOT_SPACING = 1e-3
 FIELD_INSIDE_TOLERANCE = 1e-9
 """Slack (m) when checking that the protective field lies inside the warning field."""
 
-POSITIVE = bounds(gt=0.0)
-NON_NEGATIVE = bounds(ge=0.0)
+WORLD_EXTENT = 1000.0
+"""Largest |coordinate| (m) of anything in a world: a square kilometre holds any building."""
+
+FIELD_REACH = 20.0
+"""Largest |coordinate| (m) of a field polygon in the robot frame: a safety laser's reach."""
+
+COORDINATE = bounds(ge=-WORLD_EXTENT, le=WORLD_EXTENT)
+"""World-frame coordinates (m); also bounds a yaw, which any real angle meets."""
+
+FIELD_POINT = bounds(ge=-FIELD_REACH, le=FIELD_REACH)
+BOX_SIZE = bounds(gt=0.0, le=20.0)
+"""Box edges (m): a carton to a stack of pallets or a parked vehicle."""
+
+THICKNESS = bounds(gt=0.0, le=5.0)
+HEIGHT = bounds(gt=0.0, le=30.0)
+RADIUS = bounds(gt=0.0, le=2.0)
 UNIT_INTERVAL = bounds(ge=0.0, le=1.0)
+KNOT_INDEX = bounds(ge=0, le=10_000)
+PERSON_SPEED = bounds(gt=0.0, le=3.0)
+"""A walking (1.4 m/s) or hurrying person; nobody runs through a plant at more."""
 
+PATH_SPEED = bounds(gt=0.0, le=2.0)
+"""Nominal path speed (m/s): industrial vehicles drive up to about 2 m/s."""
 
-def _check(value: float, name: str, metadata: dict[str, Range]) -> float:
-    """Return ``value`` as a finite float that satisfies ``metadata``'s range."""
-    valid = metadata["range"]
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise SpecError(MEMORY, name, f"expected a number, got {value!r}") from None
-    if not math.isfinite(number) or not valid.contains(number):
-        raise SpecError(MEMORY, name, f"must be {valid.describe()}, got {number}")
-    return number
-
-
-def _floats(value: Any, n: int, name: str) -> tuple[float, ...]:
-    """Return ``value`` as a tuple of ``n`` finite floats."""
-    array = np.asarray(value, dtype=float).reshape(-1)
-    if array.size != n or not np.all(np.isfinite(array)):
-        raise SpecError(MEMORY, name, f"expected {n} finite numbers, got {value!r}")
-    return tuple(float(v) for v in array)
-
-
-def _points(value: Any, name: str) -> tuple[Point, ...]:
-    """Return ``value`` as a tuple of finite ``(x, y)`` tuples."""
-    array = np.asarray(value, dtype=float)
-    if array.size == 0:
-        return ()
-    if array.ndim != 2 or array.shape[1] != 2 or not np.all(np.isfinite(array)):
-        raise SpecError(MEMORY, name, f"expected a list of finite [x, y] points, got {value!r}")
-    return tuple((float(x), float(y)) for x, y in array)
+START_TIME = bounds(ge=0.0, le=86_400.0)
 
 
 def _set(obj: object, name: str, value: Any) -> None:
     object.__setattr__(obj, name, value)
-
-
-def _meta(cls: type, name: str) -> dict[str, Range]:
-    """Return the range metadata of dataclass field ``name``."""
-    return cls.__dataclass_fields__[name].metadata  # type: ignore[attr-defined]
 
 
 def _rectangle(center: np.ndarray, yaw: float, length: float, width: float) -> np.ndarray:
@@ -118,6 +108,19 @@ def _rectangle(center: np.ndarray, yaw: float, length: float, width: float) -> n
 class WallSpec:
     """A straight wall from ``start`` to ``end`` (centre line), ``thickness`` wide.
 
+    Parameters
+    ----------
+    start
+        ``[x, y]`` of one end of the centre line (m).
+    end
+        ``[x, y]`` of the other end (m).
+    thickness
+        Wall thickness (m).
+    height
+        Wall height (m).
+    remission
+        Share of laser light reflected (0-1); posts read above 0.9, walls well below.
+
     Examples
     --------
     >>> wall = WallSpec((0.0, 0.0), (4.0, 0.0), thickness=0.2)
@@ -127,17 +130,14 @@ class WallSpec:
     [[4.0, -0.1], [4.0, 0.1], [0.0, 0.1], [0.0, -0.1]]
     """
 
-    start: Point
-    end: Point
-    thickness: float = field(default=0.10, metadata=POSITIVE)
-    height: float = field(default=2.5, metadata=POSITIVE)
+    start: Point = field(metadata=COORDINATE)
+    end: Point = field(metadata=COORDINATE)
+    thickness: float = field(default=0.10, metadata=THICKNESS)
+    height: float = field(default=2.5, metadata=HEIGHT)
     remission: float = field(default=0.2, metadata=UNIT_INTERVAL)
 
     def __post_init__(self) -> None:
-        _set(self, "start", _floats(self.start, 2, "start"))
-        _set(self, "end", _floats(self.end, 2, "end"))
-        for name in ("thickness", "height", "remission"):
-            _set(self, name, _check(getattr(self, name), name, _meta(WallSpec, name)))
+        check_fields(self)
         if self.length < MIN_KNOT_SPACING:
             raise SpecError(MEMORY, "end", f"wall has zero length: end equals start {self.start}")
 
@@ -161,23 +161,33 @@ class WallSpec:
 class PostSpec:
     """A reflective landmark post: a vertical cylinder with high remission.
 
+    Parameters
+    ----------
+    x
+        x of the post centre (m).
+    y
+        y of the post centre (m).
+    radius
+        Post radius (m).
+    height
+        Post height (m).
+    remission
+        Share of laser light reflected (0-1): high, so the localizer picks it out.
+
     Examples
     --------
     >>> PostSpec(1, 2).xy
     (1.0, 2.0)
     """
 
-    x: float
-    y: float
-    radius: float = field(default=0.04, metadata=POSITIVE)
-    height: float = field(default=2.5, metadata=POSITIVE)
+    x: float = field(metadata=COORDINATE)
+    y: float = field(metadata=COORDINATE)
+    radius: float = field(default=0.04, metadata=RADIUS)
+    height: float = field(default=2.5, metadata=HEIGHT)
     remission: float = field(default=0.95, metadata=UNIT_INTERVAL)
 
     def __post_init__(self) -> None:
-        _set(self, "x", _floats(self.x, 1, "x")[0])
-        _set(self, "y", _floats(self.y, 1, "y")[0])
-        for name in ("radius", "height", "remission"):
-            _set(self, name, _check(getattr(self, name), name, _meta(PostSpec, name)))
+        check_fields(self)
 
     @property
     def xy(self) -> Point:
@@ -189,6 +199,17 @@ class PostSpec:
 class BoxSpec:
     """A semi-static box: ``size`` (sx, sy, sz) centred at ``pose`` (x, y, yaw) on the floor.
 
+    Parameters
+    ----------
+    name
+        Unique name (moves refer to it).
+    size
+        ``[sx, sy, sz]`` edges of the box (m).
+    pose
+        ``[x, y, yaw]`` of the box centre on the floor (m, m, rad).
+    remission
+        Share of laser light reflected (0-1).
+
     Examples
     --------
     >>> box = BoxSpec("a", size=(0.6, 0.4, 0.5), pose=(1.0, 0.0, 0.0))
@@ -196,18 +217,13 @@ class BoxSpec:
     [[1.3, -0.2], [1.3, 0.2], [0.7, 0.2], [0.7, -0.2]]
     """
 
-    name: str
-    size: tuple[float, float, float] = field(metadata=POSITIVE)
-    pose: tuple[float, float, float]
+    name: str = field(metadata=safe_name())
+    size: tuple[float, float, float] = field(metadata=BOX_SIZE)
+    pose: tuple[float, float, float] = field(metadata=COORDINATE)
     remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
 
     def __post_init__(self) -> None:
-        size = _floats(self.size, 3, "size")
-        if min(size) <= 0.0:
-            raise SpecError(MEMORY, "size", f"every value must be > 0.0, got {list(size)}")
-        _set(self, "size", size)
-        _set(self, "pose", _floats(self.pose, 3, "pose"))
-        _set(self, "remission", _check(self.remission, "remission", _meta(BoxSpec, "remission")))
+        check_fields(self)
 
     def corners(self) -> np.ndarray:
         """Return the ``(4, 2)`` footprint corners in the world frame, counter-clockwise."""
@@ -224,6 +240,29 @@ class PersonSpec:
     carry people that are off (``enabled = false``) for scenarios to switch on with
     :meth:`WorldSpec.enable_people`.
 
+    Parameters
+    ----------
+    name
+        Unique name (scenarios switch people on by it).
+    waypoints
+        ``[[x, y], ...]`` the person walks through (m).
+    radius
+        Radius of the body cylinder (m).
+    height
+        Height of the body cylinder (m).
+    speed
+        Walking speed (m/s).
+    start_time
+        When the walk starts (s), from the run or, with ``per_lap``, the lap start.
+    loop
+        Walk back to the first waypoint and start again.
+    per_lap
+        Restart the walk at every lap.
+    remission
+        Share of laser light reflected (0-1).
+    enabled
+        Spawned unless a scenario leaves it off (``false``: only when a scenario names it).
+
     Examples
     --------
     >>> walker = PersonSpec("walker", waypoints=[(0, -2), (0, 2)], speed=1.0)
@@ -231,24 +270,21 @@ class PersonSpec:
     4.0
     """
 
-    name: str
-    waypoints: tuple[Point, ...]
-    radius: float = field(default=0.25, metadata=POSITIVE)
-    height: float = field(default=1.75, metadata=POSITIVE)
-    speed: float = field(default=1.0, metadata=POSITIVE)
-    start_time: float = field(default=0.0, metadata=NON_NEGATIVE)
+    name: str = field(metadata=safe_name())
+    waypoints: tuple[Point, ...] = field(metadata=COORDINATE)
+    radius: float = field(default=0.25, metadata=RADIUS)
+    height: float = field(default=1.75, metadata=HEIGHT)
+    speed: float = field(default=1.0, metadata=PERSON_SPEED)
+    start_time: float = field(default=0.0, metadata=START_TIME)
     loop: bool = False
     per_lap: bool = True
     remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
     enabled: bool = True
 
     def __post_init__(self) -> None:
-        waypoints = _points(self.waypoints, "waypoints")
-        if not waypoints:
+        check_fields(self)
+        if not self.waypoints:
             raise SpecError(MEMORY, "waypoints", "needs at least 1 waypoint, got none")
-        _set(self, "waypoints", waypoints)
-        for name in ("radius", "height", "speed", "start_time", "remission"):
-            _set(self, name, _check(getattr(self, name), name, _meta(PersonSpec, name)))
 
     @property
     def path_length(self) -> float:
@@ -281,6 +317,19 @@ class SegmentSpec:
     field lies inside the warning field. The segment's local-map frame is anchored at the
     path pose of ``start_knot``.
 
+    Parameters
+    ----------
+    name
+        Unique segment name (local maps are kept per segment).
+    start_knot
+        Index of the knot where the segment starts.
+    end_knot
+        Index of the knot where it ends.
+    warning
+        Warning field polygon ``[[x, y], ...]`` in the robot frame (m).
+    protective
+        Protective field polygon ``[[x, y], ...]`` in the robot frame (m), inside warning.
+
     Examples
     --------
     >>> square = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
@@ -291,26 +340,20 @@ class SegmentSpec:
 warning field (0.045 m2 of it sticks out); shrink protective or widen warning
     """
 
-    name: str
-    start_knot: int = field(metadata=NON_NEGATIVE)
-    end_knot: int = field(metadata=NON_NEGATIVE)
-    warning: tuple[Point, ...]
-    protective: tuple[Point, ...]
+    name: str = field(metadata=safe_name())
+    start_knot: int = field(metadata=KNOT_INDEX)
+    end_knot: int = field(metadata=KNOT_INDEX)
+    warning: tuple[Point, ...] = field(metadata=FIELD_POINT)
+    protective: tuple[Point, ...] = field(metadata=FIELD_POINT)
 
     def __post_init__(self) -> None:
-        for name in ("start_knot", "end_knot"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-                raise SpecError(MEMORY, name, f"must be an integer >= 0, got {value!r}")
-            _set(self, name, int(value))
+        check_fields(self)
         if self.end_knot <= self.start_knot:
             raise SpecError(
                 MEMORY,
                 "end_knot",
                 f"must be greater than start_knot ({self.start_knot}), got {self.end_knot}",
             )
-        _set(self, "warning", _points(self.warning, "warning"))
-        _set(self, "protective", _points(self.protective, "protective"))
         warning = _field_polygon(self.warning, "warning")
         protective = _field_polygon(self.protective, "protective")
         outside = protective.difference(warning).area
@@ -353,6 +396,15 @@ class PathSpec:
     listed in path order and cover it without gaps: the first starts at knot 0, each
     starts where the previous ended, the last ends at the last knot.
 
+    Parameters
+    ----------
+    knots
+        ``[[x, y], ...]`` the spline passes through, in driving order (m).
+    segments
+        The segments, in path order (array of tables ``[[path.segments]]``).
+    speed
+        Nominal forward speed the follower tracks (m/s).
+
     Examples
     --------
     >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
@@ -361,12 +413,13 @@ class PathSpec:
     1
     """
 
-    knots: tuple[Point, ...]
+    knots: tuple[Point, ...] = field(metadata=COORDINATE)
     segments: tuple[SegmentSpec, ...]
-    speed: float = field(default=0.4, metadata=POSITIVE)
+    speed: float = field(default=0.4, metadata=PATH_SPEED)
 
     def __post_init__(self) -> None:
-        knots = _points(self.knots, "knots")
+        check_fields(self)
+        knots = self.knots
         if len(knots) < 2:
             raise SpecError(MEMORY, "knots", f"needs at least 2 knots, got {len(knots)}")
         steps = np.linalg.norm(np.diff(np.asarray(knots), axis=0), axis=1)
@@ -375,9 +428,7 @@ class PathSpec:
             raise SpecError(
                 MEMORY, f"knots[{index}]", f"repeats the previous knot {knots[index - 1]}"
             )
-        _set(self, "knots", knots)
         _set(self, "segments", tuple(self.segments))
-        _set(self, "speed", _check(self.speed, "speed", _meta(PathSpec, "speed")))
         if not self.segments:
             raise SpecError(MEMORY, "segments", "needs at least 1 segment, got none")
         last = len(knots) - 1
@@ -441,6 +492,25 @@ class WorldSpec:
 
     Posts must not overlap each other or a wall; names of boxes and people are unique.
 
+    Parameters
+    ----------
+    name
+        World name (default: the file's stem).
+    walls
+        Static walls (array of inline tables).
+    posts
+        Reflective landmark posts (array of inline tables).
+    boxes
+        Semi-static boxes (array of tables ``[[boxes]]``).
+    people
+        People walking (array of tables ``[[people]]``).
+    path
+        The robot's path and its segments (table ``[path]``).
+    description
+        Free text.
+    source
+        Set by the loader to the file read; not a key of the file.
+
     Examples
     --------
     >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
@@ -463,6 +533,7 @@ radii 0.04 + 0.04 m)
     source: str = MEMORY
 
     def __post_init__(self) -> None:
+        check_fields(self)
         for name in ("walls", "posts", "boxes", "people"):
             _set(self, name, tuple(getattr(self, name)))
         _unique(self.boxes, "boxes")

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import re
 import tomllib
@@ -46,7 +47,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from worlds.errors import SpecError, join_key
+import numpy as np
+
+from worlds.errors import MEMORY, SpecError, join_key
 
 __all__ = [
     "FILE_KEY",
@@ -58,11 +61,13 @@ __all__ = [
     "as_str",
     "as_table",
     "bounds",
+    "check_fields",
     "convert",
     "did_you_mean",
     "from_table",
     "read_toml",
     "reject_unknown_keys",
+    "safe_name",
 ]
 
 FILE_KEY = "<file>"
@@ -70,6 +75,9 @@ FILE_KEY = "<file>"
 
 SUGGESTION_CUTOFF = 0.6
 """difflib similarity above which a known name is offered as "did you mean"."""
+
+SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+"""Names that may become file or folder names: no separators, no leading dot, <= 64 chars."""
 
 _TOML_POSITION = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
 
@@ -125,6 +133,17 @@ def bounds(
     {'range': Range(gt=0.0, ge=None, lt=None, le=None)}
     """
     return {"range": Range(gt=gt, ge=ge, lt=lt, le=le)}
+
+
+def safe_name() -> dict[str, bool]:
+    """Return field metadata for a name that may become a path (see ``SAFE_NAME``).
+
+    Examples
+    --------
+    >>> safe_name()
+    {'safe_name': True}
+    """
+    return {"safe_name": True}
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
@@ -391,6 +410,75 @@ def from_table(
         return cls(**kwargs)
     except SpecError as error:
         raise error.located(file, key) from None
+
+
+@functools.cache
+def _checked_fields(cls: type) -> tuple[tuple[str, Any, Range | None, bool], ...]:
+    """Return ``(name, hint, range, safe name)`` of the fields :func:`check_fields` converts."""
+    hints = typing.get_type_hints(cls)
+    return tuple(
+        (field.name, hints[field.name], field.metadata.get("range"),
+         field.metadata.get("safe_name", False))
+        for field in dataclasses.fields(cls)
+        if field.init and _is_plain(hints[field.name])
+    )
+
+
+def _is_plain(hint: Any) -> bool:
+    """Whether ``hint`` is a number, string or boolean, a tuple of them, or optional."""
+    if hint in (float, int, str, bool):
+        return True
+    origin = typing.get_origin(hint)
+    args = [arg for arg in typing.get_args(hint) if arg is not type(None) and arg is not Ellipsis]
+    if origin in (typing.Union, types.UnionType, tuple):
+        return bool(args) and all(_is_plain(arg) for arg in args)
+    return False
+
+
+def _as_toml(value: Any) -> Any:
+    """Return a Python-built value as the TOML parser would give it (lists, plain numbers)."""
+    if isinstance(value, np.ndarray | tuple | list):
+        return [_as_toml(item) for item in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def check_fields(obj: Any) -> None:
+    """Validate a dataclass's plain fields exactly as the loader does, in place.
+
+    Numbers, strings, booleans and tuples of them are converted with :func:`convert`
+    against the field's type and range metadata, so a spec built in Python fails with
+    the same message as a file (its file reads ``<memory>``, its key is the field's
+    name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``. Nested
+    dataclasses validate themselves. Call it first in ``__post_init__``.
+
+    Examples
+    --------
+    >>> from dataclasses import dataclass, field
+    >>> @dataclass(frozen=True)
+    ... class Wheel:
+    ...     radius: float = field(default=0.1, metadata=bounds(gt=0.0, le=1.0))
+    ...     def __post_init__(self):
+    ...         check_fields(self)
+    >>> Wheel(radius=2).radius
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: <memory>: radius: must be > 0.0 and <= 1.0, got 2.0
+    >>> Wheel(radius=np.float32(0.5)).radius
+    0.5
+    """
+    for name, hint, valid, path_like in _checked_fields(type(obj)):
+        if getattr(obj, name) is None and type(None) in typing.get_args(hint):
+            continue
+        value = convert(hint, _as_toml(getattr(obj, name)), file=MEMORY, key=name, valid=valid)
+        if path_like and not SAFE_NAME.fullmatch(value):
+            raise SpecError(
+                MEMORY, name,
+                f"{value!r} is not a usable name: use 1-64 letters, digits, '_', '-' or '.', "
+                "starting with a letter or digit (it may become a file name)",
+            )
+        object.__setattr__(obj, name, value)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

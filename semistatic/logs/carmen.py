@@ -321,6 +321,13 @@ def _floats(tokens: list[str], what: str) -> np.ndarray:
         raise _RecordError(f"{what}: non-numeric field {bad!r}") from None
 
 
+def _finite(values: np.ndarray, what: str) -> np.ndarray:
+    """Return ``values`` if every one is finite (a pose or a stamp), else raise."""
+    if not np.all(np.isfinite(values)):
+        raise _RecordError(f"{what}: must be finite numbers, got {values.tolist()}")
+    return values
+
+
 def _is_float(token: str) -> bool:
     try:
         float(token)
@@ -373,7 +380,8 @@ def _parse_flaser(tokens: list[str], limit: float) -> Scan:
     ranges = _floats(tokens[2 : 2 + beams], "FLASER range")
     tail = 2 + beams
     # x y theta odom_x odom_y odom_theta timestamp host logger_timestamp
-    numbers = _floats(tokens[tail : tail + 7], "FLASER pose/timestamp")
+    numbers = _finite(_floats(tokens[tail : tail + 7], "FLASER pose/timestamp"),
+                      "FLASER pose/timestamp")
     pose, stamp = numbers[:3], numbers[6]
     _floats(tokens[tail + 8 : tail + 9], "FLASER logger timestamp")
     angle_min, increment = flaser_angles(beams)
@@ -411,6 +419,7 @@ def _parse_robotlaser1(tokens: list[str], limit: float | None) -> Scan:
     # laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv fsd ssd turn_axis
     # timestamp host logger_timestamp
     numbers = _floats(tokens[tail : tail + 12], "ROBOTLASER1 pose")
+    _finite(numbers[[0, 1, 2, 11]], "ROBOTLASER1 laser pose/timestamp")
     _floats(tokens[tail + 13 : tail + 14], "ROBOTLASER1 logger timestamp")
     range_max = float(record_max_range) if limit is None else min(limit, record_max_range)
     return Scan(

@@ -387,7 +387,9 @@ def _open_reader(path: Path) -> Iterator[AnyReader]:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except (AnyReaderError, OSError, ValueError, KeyError) as error:
-        raise BagError(f"{path}: cannot open as a ROS bag ({error})") from error
+        # rosbags' YAML errors span several lines; one line reads better in a terminal.
+        reason = " ".join(str(error).split())
+        raise BagError(f"{path}: cannot open as a ROS bag ({reason})") from error
     try:
         yield reader
     finally:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,7 @@ from scenarios.load import (
     parse_override,
     scenario_from_toml,
 )
-from scenarios.spec import BoxMove
+from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems
 from worlds.errors import SpecError
 from worlds.load import DATA_DIR as WORLD_DATA_DIR
@@ -192,7 +193,7 @@ def test_later_overrides_win():
     [
         ("laps=-1", "laps", "must be >= 1 and <= 1000, got -1"),
         ("laps=2.5", "laps", "expected an integer, got a float 2.5"),
-        ("seed=-3", "seed", "must be >= 0, got -3"),
+        ("seed=-3", "seed", "must be >= 0 and <= 9223372036854775807, got -3"),
         ("policy=fast", "policy", "must be one of conservative, adaptive"),
         ("mapper.gate=-0.1", "mapper.gate", "must be > 0"),
         ("safety.slowdown=1.5", "safety.slowdown", "must be > 0.0 and <= 1.0, got 1.5"),
@@ -279,7 +280,7 @@ def test_not_toml_names_the_line(tmp_path):
         ('world = "sim1"\nlaps = -2\n', "laps", "must be >= 1 and <= 1000, got -2"),
         ('world = "sim1"\nlaps = 0\n', "laps", "must be >= 1"),
         (GOOD + 'policy = "fast"\n', "policy", "must be one of conservative, adaptive"),
-        (GOOD + "seed = -1\n", "seed", "must be >= 0, got -1"),
+        (GOOD + "seed = -1\n", "seed", "must be >= 0 and <= 9223372036854775807, got -1"),
         ("laps = 5\n", "world", "missing required key"),
         ('world = "sim11"\n', "world", "not a bundled world (did you mean 'sim1'?)"),
         (GOOD + 'robot = "pioner"\n', "robot", "(did you mean 'pioneer3dx'?)"),
@@ -422,7 +423,7 @@ def test_valid_moves_in_a_user_file_load(tmp_path):
     assert boxes == {"carton_aisle": (3.8, -0.66, 0.0), "pallet_turn": (6.5, -0.5, 0.35)}
 
 
-# --- a world's own flaws are not blamed on the scenario -----------------------------------
+# --- lap 1 is checked as it stands -------------------------------------------------------
 
 
 @pytest.fixture
@@ -435,23 +436,56 @@ def flawed_world(tmp_path: Path) -> Path:
     return path
 
 
-def test_world_flaws_not_caused_by_the_moves_do_not_stop_loading(tmp_path, flawed_world):
+def test_a_flawed_world_is_rejected_at_lap_1_in_its_own_file(tmp_path, flawed_world):
     assert layout_problems(load_world(flawed_world))
     text = 'world = "flawed.toml"\n' + MOVE_OF_AISLE.format(lap=2, box="carton_aisle", x=3.5)
-    spec = load_scenario(write(tmp_path, text))
-    assert spec.world == str(flawed_world)
+    error = error_of(write(tmp_path, text))
+    names = [box.name for box in load_world(flawed_world).boxes]
+    assert (error.file, error.key) == (str(flawed_world), f"boxes[{names.index('carton_north')}]")
+    assert error.message.startswith("lap 1: box 'carton_north': the swept robot footprint")
 
 
-def test_moving_a_flawed_box_to_another_bad_place_is_an_error(tmp_path, flawed_world):
-    text = (
-        'world = "flawed.toml"\n[[moves]]\nlap = 3\naction = "move"\nbox = "carton_north"\n'
-        "pose = [7.8, 3.8, 0.0]\n"
-    )
-    path = write(tmp_path, text)
-    error = error_of(path)
-    assert (error.file, error.key) == (str(path), "moves[0]")
-    assert error.message.startswith("before lap 3: path: ")
-    assert "hidden by box 'carton_north'" in error.message
+def _moved(old: str, new: str):
+    """Return an edit of sim1's text that replaces ``old`` (which must be there) by ``new``."""
+
+    def edit(text: str) -> str:
+        assert old in text
+        return text.replace(old, new, 1)
+
+    return edit
+
+
+def _posts_kept(count: int):
+    """Return an edit of sim1's text that keeps only its first ``count`` posts."""
+
+    def edit(text: str) -> str:
+        block = re.search(r"^posts = \[\n(.*?)^\]", text, flags=re.S | re.M)
+        posts = re.findall(r"\{[^}]*\}", block[1])
+        return text.replace(block[0], "posts = [" + ", ".join(posts[:count]) + "]")
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    ("edit", "key", "fragment"),
+    [
+        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [3.0, -1.45, 0.0]"),
+                     "boxes[0]", "box 'carton_aisle': overlaps walls[0]", id="box-in-wall"),
+        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [1.0, 0.0, 0.0]"),
+                     "boxes[0]", "box 'carton_aisle': the swept robot footprint overlaps it",
+                     id="box-on-start"),
+        pytest.param(_posts_kept(2), "posts", "see fewer than 3 posts", id="two-posts"),
+        pytest.param(_posts_kept(0), "posts", "see fewer than 3 posts, the worst 0", id="no-posts"),
+    ],
+)
+def test_lap_1_problems_are_errors_of_the_world_file(tmp_path, edit, key, fragment):
+    text = (WORLD_DATA_DIR / "sim1.toml").read_text()
+    world_file = tmp_path / "edited.toml"
+    world_file.write_text(edit(text))
+    error = error_of(write(tmp_path, 'world = "edited.toml"\n'))
+    assert (error.file, error.key) == (str(world_file), key)
+    assert error.message.startswith("lap 1: ")
+    assert fragment in error.message
 
 
 def test_relative_world_path_resolves_next_to_the_scenario(tmp_path, flawed_world):
@@ -486,12 +520,40 @@ def test_world_for_lap_counts_laps_from_1(lap):
         world_for_lap(load_world("sim1"), [], lap)
 
 
-def test_bad_box_size_in_a_move_names_the_move():
-    move = BoxMove(
-        lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0), size=(0.6, -0.5, 0.6)
-    )
-    with pytest.raises(SpecError, match=r"^f\.toml: moves\[0\]\.size: every value must be > 0"):
-        world_for_lap(load_world("sim1"), [move], 2, file="f.toml")
+@pytest.mark.parametrize(
+    ("build", "text", "key"),
+    [
+        (lambda: ScenarioSpec(name="s", world="sim1", laps=0), "laps = 0", "laps"),
+        (lambda: ScenarioSpec(name="s", world="sim1", seed=-1), "seed = -1", "seed"),
+        (lambda: ScenarioSpec(name="s", world="sim1", lap_timeout=1e9), "lap_timeout = 1e9",
+         "lap_timeout"),
+        (lambda: ScenarioSpec(name="../up", world="sim1"), 'name = "../up"', "name"),
+        (lambda: Rates(safety_hz=float("nan")), "[rates]\nsafety_hz = nan", "rates.safety_hz"),
+        (lambda: Noise(range=-1.0), "[noise]\nrange = -1.0", "noise.range"),
+        (lambda: SafetySettings(min_points=2.5), "[safety]\nmin_points = 2.5",
+         "safety.min_points"),
+        (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0),
+                         size=(0.6, -0.5, 0.6)),
+         '[[moves]]\nlap = 2\naction = "move"\nbox = "carton_aisle"\npose = [3.5, -0.66, 0.0]'
+         "\nsize = [0.6, -0.5, 0.6]", "moves[0].size"),
+        (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, 1e7, 0.0)),
+         '[[moves]]\nlap = 2\naction = "move"\nbox = "carton_aisle"\npose = [3.5, 1e7, 0.0]',
+         "moves[0].pose"),
+    ],
+)
+def test_spec_built_in_code_fails_as_the_file_would(tmp_path, build, text, key):
+    with pytest.raises(SpecError) as in_code:
+        build()
+    path = tmp_path / "scenario.toml"
+    top, _, tables = text.partition("[")
+    path.write_text(f'world = "sim1"\n{top}\n' + (f"[{tables}\n" if tables else ""))
+    with pytest.raises(SpecError) as from_file:
+        load_scenario(path)
+    assert in_code.value.file == "<memory>"
+    assert from_file.value.file == str(path)
+    assert from_file.value.key == key
+    assert key.endswith(in_code.value.key)
+    assert in_code.value.message == from_file.value.message
 
 
 def test_check_moves_blames_the_move_that_broke_the_layout():

@@ -254,7 +254,7 @@ def test_wrong_type_names_key(tmp_path, old, new, key, fragment):
             "radius = 0.05",
             "radius = -0.05",
             "posts[1].radius",
-            "must be > 0.0, got -0.05",
+            "must be > 0.0 and <= 2.0, got -0.05",
             id="negative-radius",
         ),
         pytest.param(

@@ -1,0 +1,174 @@
+"""Output directories that are replaced whole, checked before any work starts.
+
+A command first checks that its output directory can be created
+(:func:`check_output_dir`, before anything runs), then writes everything into a staging
+directory beside it and swaps the two at the end (:func:`stage_and_publish`): an old
+result is replaced as a whole, never mixed with a new one, and a run that fails or is
+interrupted leaves it untouched. Staging directories left by killed runs (their process
+is gone) are removed by the next check of the same directory.
+
+A directory is a semistatic result when it holds ``RESULT_MARKER`` (or, written before
+the marker existed, one of ``LEGACY_RESULT_FILES``); a non-empty directory that is not
+is never replaced.
+
+Examples
+--------
+>>> import tempfile
+>>> folder = Path(tempfile.mkdtemp())
+>>> out = check_output_dir(folder / "run")
+>>> stage_and_publish(out, lambda staging: (staging / "a.txt").write_text("1"))
+>>> stage_and_publish(out, lambda staging: (staging / "b.txt").write_text("2"))
+>>> sorted(path.name for path in out.iterdir())
+['.semistatic-result', 'b.txt']
+>>> check_output_dir(folder / "run" / "b.txt" / "deeper")  # doctest: +ELLIPSIS
+Traceback (most recent call last):
+...
+worlds.errors.SpecError: --out: .../b.txt/deeper: cannot create it: .../b.txt is a file...
+>>> shutil.rmtree(folder)
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from worlds.errors import SpecError
+
+__all__ = [
+    "LEGACY_RESULT_FILES",
+    "RESULT_MARKER",
+    "check_output_dir",
+    "check_writable_parent",
+    "is_result_dir",
+    "remove_stale_staging",
+    "stage_and_publish",
+]
+
+RESULT_MARKER = ".semistatic-result"
+"""File that marks a directory as written by semistatic (so it may be replaced)."""
+
+LEGACY_RESULT_FILES = ("metrics.json", "sweep.json", "table1.md")
+"""Files that mark a result written before ``RESULT_MARKER`` existed."""
+
+_LEFTOVER = re.compile(r"\.(?P<name>.+)\.(?P<kind>staging|previous)-(?P<pid>\d+)-[^.]+$")
+
+
+def is_result_dir(path: Path) -> bool:
+    """Return whether ``path`` is a directory semistatic wrote (or an empty one).
+
+    Examples
+    --------
+    >>> is_result_dir(Path(tempfile.mkdtemp()))
+    True
+    """
+    if not path.is_dir():
+        return False
+    if (path / RESULT_MARKER).exists() or any((path / n).exists() for n in LEGACY_RESULT_FILES):
+        return True
+    return not any(path.iterdir())
+
+
+def _process_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # somebody else's process: alive
+        return True
+    return True
+
+
+def remove_stale_staging(out: Path) -> None:
+    """Remove the staging directories of ``out`` whose process is gone.
+
+    A ``previous`` copy (the old result moved aside for the swap) is put back when the
+    swap never finished, so a kill at the worst moment still leaves the old result.
+    """
+    if not out.parent.is_dir():
+        return
+    for leftover in out.parent.glob(f".{out.name}.*-*"):
+        match = _LEFTOVER.fullmatch(leftover.name)
+        if match is None or match["name"] != out.name or _process_alive(int(match["pid"])):
+            continue
+        if match["kind"] == "previous" and not out.exists():
+            os.rename(leftover, out)
+        else:
+            shutil.rmtree(leftover, ignore_errors=True)
+
+
+def check_writable_parent(path: Path, *, option: str) -> None:
+    """Raise :class:`SpecError` naming ``option`` unless ``path`` can be created.
+
+    The nearest existing ancestor must be a directory in which a directory can be made
+    (tried, not guessed from permission bits, which root ignores).
+
+    Examples
+    --------
+    >>> check_writable_parent(Path("/proc/semistatic/x"), option="--bag")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: --bag: /proc/semistatic/x: cannot create it in /proc: ...
+    """
+    ancestor = path.parent.absolute()
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise SpecError(
+            option, str(path), f"cannot create it: {ancestor} is a file, not a directory"
+        )
+    try:
+        Path(tempfile.mkdtemp(prefix=".semistatic-probe-", dir=ancestor)).rmdir()
+    except OSError as error:
+        reason = error.strerror or str(error)
+        raise SpecError(option, str(path), f"cannot create it in {ancestor}: {reason}") from None
+
+
+def check_output_dir(out: str | os.PathLike[str], *, option: str = "--out") -> Path:
+    """Return ``out`` as a path if a result can be published there, else raise.
+
+    Call it before any work: ``out`` must be new, empty or an earlier semistatic result,
+    and creatable. Stale staging directories of ``out`` are removed on the way.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise SpecError(option, str(out), "exists and is not a directory; choose a directory")
+    if out.exists() and not is_result_dir(out):
+        raise SpecError(
+            option, str(out),
+            "is a non-empty directory that is not a semistatic result; choose a new or "
+            "empty directory (results replace the directory as a whole)",
+        )
+    check_writable_parent(out / RESULT_MARKER if out.exists() else out, option=option)
+    remove_stale_staging(out)
+    return out
+
+
+def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
+    """Let ``fill`` write into a staging directory, then make it ``out`` as a whole.
+
+    If ``fill`` raises (or the process is interrupted), ``out`` is untouched; otherwise
+    an earlier result in ``out`` is replaced entirely, nothing of it is kept.
+    """
+    out = check_output_dir(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-{os.getpid()}-",
+                                    dir=out.parent))
+    try:
+        fill(staging)
+        (staging / RESULT_MARKER).write_text("written by semistatic; replaced as a whole\n")
+        if out.exists():
+            previous = Path(tempfile.mkdtemp(prefix=f".{out.name}.previous-{os.getpid()}-",
+                                             dir=out.parent))
+            os.replace(out, previous)
+            os.rename(staging, out)
+            shutil.rmtree(previous, ignore_errors=True)
+        else:
+            os.rename(staging, out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)

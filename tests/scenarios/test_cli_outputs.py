@@ -1,0 +1,51 @@
+"""Output directories are replaced as a whole; a lap that cannot complete is a failed run."""
+
+from __future__ import annotations
+
+import json
+
+from scenarios.output_dir import RESULT_MARKER
+from tests.scenarios.cli_helpers import run_cli
+from tests.scenarios.tiny_world import TINY_SCENARIO, write_tiny
+
+
+def test_a_reused_output_directory_holds_only_the_newest_run(capsys, tmp_path):
+    scenario = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    # A staging directory left by a killed run (its process id no longer exists).
+    stale = tmp_path / ".out.staging-999999999-abc"
+    stale.mkdir()
+    (stale / "metrics.json").write_text("{}")
+
+    status, _, err = run_cli(capsys, "run", scenario, "--laps", 2, "--out", out)
+    assert status == 0, err
+    assert (out / "maps" / "lap_02.geojson").exists()
+    assert any((out / "figures").iterdir())
+    assert not stale.exists()
+
+    status, stdout, err = run_cli(capsys, "run", scenario, "--laps", 1, "--no-figures",
+                                  "--out", out)
+    assert status == 0, err
+    assert json.loads((out / "metrics.json").read_text())["laps"] == 1
+    assert sorted(path.name for path in (out / "maps").iterdir()) == ["lap_01.geojson"]
+    assert not (out / "figures").exists()
+    assert (out / RESULT_MARKER).exists()
+    assert "Table 1 needs at least 2 laps" in stdout
+    assert "None" not in stdout
+    assert [path.name for path in tmp_path.iterdir() if path.name.startswith(".")] == []
+
+
+def test_a_lap_that_times_out_fails_the_run_and_is_recorded(capsys, tmp_path):
+    scenario = write_tiny(tmp_path, scenario="lap_timeout = 2.0\n" + TINY_SCENARIO)
+    out = tmp_path / "out"
+    status, stdout, err = run_cli(capsys, "run", scenario, "--laps", 1, "--no-figures",
+                                  "--out", out)
+    assert status == 1
+    failure = [line for line in err.splitlines() if line.startswith("run failed")]
+    assert len(failure) == 1
+    assert "lap 1: did not reach the end of the path within lap_timeout = 2 s" in failure[0]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["safety"]["laps_completed"] == 0
+    assert [lap["lap"] for lap in metrics["safety"]["failed_laps"]] == [1]
+    assert "detection: not scored" in stdout
+    assert "precision" not in stdout

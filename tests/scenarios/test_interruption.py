@@ -1,0 +1,218 @@
+"""Ctrl-C (SIGINT) and SIGKILL in run, table, tune and replay: the command stops promptly
+with one line and exit 130 (SIGINT), no process outlives it, an earlier good result is
+left intact and no staging directory survives the next command on the same directory.
+
+Each command runs in a subprocess with stderr piped, so it prints progress lines; the
+signal is sent once its progress line (or its worker processes) shows it is working,
+never after a fixed sleep. Timeouts are generous: the machine may be loaded.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios.output_dir import RESULT_MARKER
+from tests.scenarios.tiny_world import write_tiny
+
+pytestmark = pytest.mark.slow
+
+START_TIMEOUT_S = 120.0
+"""Longest wait for a command to show it is working (imports and loads on a busy machine)."""
+
+STOP_TIMEOUT_S = 20.0
+"""Longest wait for a command to stop after the signal."""
+
+BUSY_CPU_S = 0.5
+"""CPU time (s) after which a worker is surely inside a run, not waiting for one."""
+
+WORKERS_STOP_S = 3.0
+"""Longest wait for the workers to stop once their parent stopped: shorter than one of
+their runs (5 laps of the tiny world, 2 of a bundled scenario), so waiting for them to
+finish their run would fail."""
+
+
+def _children(pid: int) -> set[int]:
+    """Return the ids of the live processes whose parent is ``pid`` (Linux /proc)."""
+    found = set()
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[1]) == pid and fields[0] != "Z":
+            found.add(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
+def _corridor_log(path: Path, passes: int) -> Path:
+    """Write a CARMEN log of a robot driving a 3 m corridor back and forth."""
+    angles = np.radians(np.arange(-90.0, 90.0, 1.0))
+    lines, stamp = [], 0.0
+    for index in range(passes):
+        xs = np.arange(0.0, 3.0, 0.1) if index % 2 == 0 else np.arange(3.0, 0.0, -0.1)
+        theta = 0.0 if index % 2 == 0 else np.pi
+        heading = angles + theta
+        with np.errstate(divide="ignore"):
+            left = np.where(np.sin(heading) > 1e-9, 1.0 / np.sin(heading), np.inf)
+            right = np.where(np.sin(heading) < -1e-9, -1.0 / np.sin(heading), np.inf)
+        values = " ".join(f"{r:.3f}" for r in np.minimum(np.minimum(left, right), 81.83))
+        for x in xs:
+            stamp += 1.0
+            pose = f"{x:.3f} 0.0 {theta:.6f}"
+            lines.append(f"FLASER 180 {values} {pose} {pose} {stamp:.1f} test {stamp:.1f}")
+    with gzip.open(path, "wt") as stream:
+        stream.write("\n".join(lines) + "\n")
+    return path
+
+
+def _previous_result(out: Path) -> str:
+    """Make ``out`` an earlier good result; return the text that must survive."""
+    out.mkdir()
+    (out / RESULT_MARKER).write_text("earlier run\n")
+    text = json.dumps({"earlier": "good result"})
+    (out / "metrics.json").write_text(text)
+    return text
+
+
+def _command(kind: str, tmp_path: Path, out: Path) -> tuple[list[str], str | None, int]:
+    """Return (arguments, progress marker or None, workers to wait for) of one command."""
+    scenario = write_tiny(tmp_path)
+    if kind == "run":
+        return ["run", str(scenario), "--laps", "2", "--no-figures"], "lap 1 of 2", 0
+    if kind == "table":
+        return ["table", "--laps", "2", "--jobs", "2", "--no-figures"], None, 2
+    if kind == "tune":
+        return (["tune", str(scenario), "--laps", "5", "--jobs", "2", "--no-figures",
+                 "--grid", "mapper.gate=0.08,0.12,0.16"], None, 2)
+    log = _corridor_log(tmp_path / "corridor.log.gz", passes=200)
+    return ["replay", str(log), "--no-figures", "--tile", "2"], "replay corridor: 500 scans", 0
+
+
+def _start(args: list[str], out: Path, cwd: Path) -> subprocess.Popen:
+    # stdout goes to a file: workers writing into a closed pipe would die of SIGPIPE and
+    # hide whether they stop with their parent on their own.
+    with open(cwd / "stdout.txt", "w") as stdout:
+        return subprocess.Popen(
+            [sys.executable, "-m", "scenarios.cli", *args, "--out", str(out)],
+            cwd=cwd, stdout=stdout, stderr=subprocess.PIPE, text=True,
+        )
+
+
+def _wait_until_working(process: subprocess.Popen, marker: str | None, workers: int) -> set[int]:
+    """Wait for ``marker`` on stderr or for ``workers`` child processes; return the children."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    if marker is not None:
+        for line in process.stderr:
+            if marker in line:
+                return _children(process.pid)
+            assert time.monotonic() < deadline, f"no {marker!r} in time"
+        pytest.fail(f"the command ended before printing {marker!r}")
+    # Busy workers: each has spent CPU time in its run (an idle, just-forked worker would
+    # stop at its parent's death anyway, reading the closed task queue).
+    while len(children := _children(process.pid)) < workers or min(
+        _cpu_seconds(pid) for pid in children
+    ) < BUSY_CPU_S:
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, "the workers did not start in time"
+        time.sleep(0.05)
+    return children
+
+
+def _cpu_seconds(pid: int) -> float:
+    """Return the user + system CPU time (s) process ``pid`` has used (0 once gone)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return 0.0
+    fields = stat[stat.rindex(")") + 2 :].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _wait_stopped(process: subprocess.Popen, workers: set[int]) -> None:
+    """Wait for ``process`` to end, then for ``workers`` within ``WORKERS_STOP_S``.
+
+    ``wait`` rather than ``communicate``: reading stderr to its end would also wait for
+    the workers, which hold it open, and hide how long they outlived their parent.
+    """
+    try:
+        process.wait(timeout=STOP_TIMEOUT_S)
+    finally:
+        process.kill()
+    deadline = time.monotonic() + WORKERS_STOP_S
+    while any(_alive(pid) for pid in workers):
+        assert time.monotonic() < deadline, f"processes outlived their parent: {workers}"
+        time.sleep(0.05)
+
+
+def _leftovers(folder: Path) -> list[str]:
+    return sorted(path.name for path in folder.iterdir() if ".staging-" in path.name
+                  or ".previous-" in path.name)
+
+
+def _interrupted(tmp_path: Path, kind: str, signal_number: int) -> tuple[Path, str, str, int]:
+    """Start ``kind`` over an earlier result, signal it while it works, wait for the end.
+
+    Returns the output directory, the earlier result's text, stderr and the exit status.
+    """
+    out = tmp_path / "results"
+    old = _previous_result(out)
+    args, marker, workers = _command(kind, tmp_path, out)
+    process = _start(args, out, tmp_path)
+    children = _wait_until_working(process, marker, workers)
+    process.send_signal(signal_number)
+    _wait_stopped(process, children)
+    return out, old, process.stderr.read(), process.returncode
+
+
+@pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
+def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, kind):
+    out, old, err, status = _interrupted(tmp_path, kind, signal.SIGINT)
+    assert status == 130, err
+    assert "Traceback" not in err
+    assert err.strip().splitlines()[-1].startswith("interrupted")
+    assert (out / "metrics.json").read_text() == old
+    assert _leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
+def test_sigkill_leaves_no_process_and_the_next_command_cleans_up(tmp_path, kind):
+    out, old, _, _ = _interrupted(tmp_path, kind, signal.SIGKILL)
+    assert (out / "metrics.json").read_text() == old
+    # A staging directory a killed run left behind (it may have been killed mid-write).
+    (tmp_path / f".results.staging-{_dead_pid()}-x").mkdir()
+    check = subprocess.run(
+        [sys.executable, "-m", "scenarios.cli", "check", "sim1", "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S,
+    )
+    assert check.returncode == 0, check.stderr
+    assert _leftovers(tmp_path) == []
+    assert (out / "metrics.json").read_text() == old
+
+
+def _dead_pid() -> int:
+    """Return a process id that no running process has."""
+    pid = os.getpid() + 100_000
+    while _alive(pid):
+        pid += 1
+    return pid
