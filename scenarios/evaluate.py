@@ -4,8 +4,11 @@ Scores the paper's pipeline, the default extraction and the split-and-merge base
 (:data:`semistatic.evaluation.EXTRACTORS`) on one scan in ``--every`` of a CARMEN log or
 bag, with replay's thresholds (:data:`scenarios.replay.REPLAY_PARAMS`) and the
 Douglas-Peucker tolerance fitted to the log's measured range noise, as replay does.
-``--sweep`` adds a curve of RMSE against vertices per scan over several tolerances,
-written to ``DIR/evaluation.json`` and ``DIR/figures/rmse_vertices.png``.
+The paper's pipeline is also scored at the default's vertex count (its tolerance bisected,
+:func:`semistatic.evaluation.at_vertex_count`). ``--sweep`` adds a curve of RMSE against
+vertices per scan over several tolerances, written to ``DIR/evaluation.json`` and
+``DIR/figures/rmse_vertices.png``. On the logs PLE was evaluated on, its published figures
+(:mod:`semistatic.published`) are printed at our vertex count and drawn beside our curves.
 
 Examples
 --------
@@ -25,8 +28,14 @@ from pathlib import Path
 
 from scenarios.output_dir import check_output_dir, stage_and_publish
 from scenarios.replay import NOISE_SCANS, REPLAY_PARAMS, open_log
-from semistatic.evaluation import EXTRACTORS, RayScore, tolerance_sweep
+from semistatic.evaluation import EXTRACTORS, RayScore, at_vertex_count, tolerance_sweep
 from semistatic.noise import estimate_range_noise, noise_params
+from semistatic.published import (
+    PLE_PUBLISHED,
+    PLE_VERTEX_COUNTS,
+    published_log,
+    published_rmse,
+)
 from worlds.errors import SpecError
 
 __all__ = ["add_parser", "main_evaluate", "score_row"]
@@ -117,8 +126,20 @@ def main_evaluate(args: argparse.Namespace) -> int:
     params = noise_params(REPLAY_PARAMS, sigma)
     print(f"{name}: {len(scans)} scans (one in {args.every}), range noise "
           f"{100 * sigma:.2f} cm, tolerance {100 * params.epsilon:.2f} cm")
-    for method, points in tolerance_sweep(scans, params, [params.epsilon]).items():
+    at_default = tolerance_sweep(scans, params, [params.epsilon])
+    for method, points in at_default.items():
         print("  " + score_row(method, *points[0]))
+    ours = at_default["default"][0][1]
+    vertices = ours.vertices_per_scan
+    paper_epsilon, paper = at_vertex_count(scans, params, vertices, method="paper")
+    print(f"  paper's pipeline at equal vertex count ({paper.vertices_per_scan:.1f}/scan, "
+          f"tolerance {100 * paper_epsilon:.2f} cm): RMSE {100 * paper.rmse:.2f} cm; the "
+          f"default is {100 * (1.0 - ours.rmse / paper.rmse):.0f} % below")
+    reference = published_log(name)
+    if reference is not None:
+        print(f"  published (Schaefer et al. 2018) at {vertices:.1f} vertices/scan: "
+              f"PLE+ {100 * published_rmse(reference, vertices):.2f} cm, "
+              f"PLE {100 * published_rmse(reference, vertices, 'PLE'):.2f} cm")
     if not sweep:
         return 0
     curves = tolerance_sweep(scans, params, sweep)
@@ -137,15 +158,27 @@ def main_evaluate(args: argparse.Namespace) -> int:
     def fill(staging: Path) -> None:
         (staging / "evaluation.json").write_text(json.dumps(
             {"log": name, "every": args.every, "noise_sigma_m": sigma,
-             "default_epsilon_m": params.epsilon, "curves": table}, indent=2))
-        _plot(staging / "figures" / "rmse_vertices.png", name, table)
+             "default_epsilon_m": params.epsilon, "curves": table,
+             "published": _published(reference)}, indent=2))
+        _plot(staging / "figures" / "rmse_vertices.png", name, table, reference)
 
     stage_and_publish(out, fill)
     print(f"results in {out}/ (evaluation.json, figures/rmse_vertices.png)")
     return 0
 
 
-def _plot(path: Path, name: str, table: dict) -> None:
+def _published(reference: str | None) -> dict | None:
+    """Return PLE's published curves for the log ``reference`` as JSON, or None."""
+    if reference is None:
+        return None
+    curve = PLE_PUBLISHED[reference]
+    return {"source": "Schaefer et al., IROS 2018, Fig. 4a data (acschaefer/ple eval.mat)",
+            "log": reference, "vertices_per_scan": list(PLE_VERTEX_COUNTS),
+            "ple_plus_rmse_m": list(curve.ple_plus), "ple_rmse_m": list(curve.ple),
+            "coverage": list(curve.coverage)}
+
+
+def _plot(path: Path, name: str, table: dict, reference: str | None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -157,6 +190,12 @@ def _plot(path: Path, name: str, table: dict) -> None:
         points = table.get(method, [])
         axes.plot([p["vertices_per_scan"] for p in points],
                   [100 * p["rmse_m"] for p in points], marker="o", label=method)
+    if reference is not None:
+        curve = PLE_PUBLISHED[reference]
+        for label, values in (("PLE+ (published)", curve.ple_plus),
+                              ("PLE (published)", curve.ple)):
+            axes.plot(PLE_VERTEX_COUNTS, [100 * value for value in values],
+                      linestyle="--", marker="s", label=label)
     axes.set_xlabel("vertices per scan")
     axes.set_ylabel("ray-wise RMSE (cm)")
     axes.set_title(f"{name}: RMSE against vertices per scan")

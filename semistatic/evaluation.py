@@ -14,7 +14,8 @@ vertices per scan
 
 :func:`ray_errors` scores one scan, :func:`evaluate_scans` pools a log, and
 :func:`tolerance_sweep` traces RMSE against vertices per scan for several extractors
-(:data:`EXTRACTORS`: the paper's pipeline, the default, split-and-merge).
+(:data:`EXTRACTORS`: the paper's pipeline, the default, split-and-merge), and
+:func:`at_vertex_count` scores one of them at a given vertex count.
 
 Examples
 --------
@@ -43,6 +44,7 @@ from semistatic.types import Scan, beam_directions
 __all__ = [
     "EXTRACTORS",
     "RayScore",
+    "at_vertex_count",
     "evaluate_scans",
     "paper_params",
     "ray_errors",
@@ -289,3 +291,76 @@ def tolerance_sweep(
         ]
         for name in methods
     }
+
+
+# Bisection of the tolerance in :func:`at_vertex_count`: vertex counts are whole numbers per
+# scan, so a few dozen halvings of a log-scale bracket pin the count as well as it can be.
+VERTEX_MATCH_STEPS = 24
+VERTEX_MATCH_BRACKET = (1e-4, 1.0)
+
+
+def at_vertex_count(
+    scans: Sequence[Scan],
+    params: MapperParams,
+    vertices_per_scan: float,
+    *,
+    method: str = "paper",
+    every: int = 1,
+) -> tuple[float, RayScore]:
+    """Return the tolerance at which ``method`` stores ``vertices_per_scan``, and its score.
+
+    Accuracy is only comparable at equal vertex counts (a tighter tolerance buys accuracy
+    with vertices): this bisects the Douglas-Peucker tolerance, on a log scale within
+    ``VERTEX_MATCH_BRACKET`` (m), until the method's mean vertex count is closest to
+    ``vertices_per_scan``.
+
+    Parameters
+    ----------
+    scans
+        The scans (a sequence, traversed once per step).
+    params
+        Base thresholds; each step replaces ``epsilon``.
+    vertices_per_scan
+        The vertex count to match, ``> 0``.
+    method
+        A name in :data:`EXTRACTORS`.
+    every
+        Score one scan in ``every``.
+
+    Examples
+    --------
+    >>> angles = np.radians(np.arange(-60.0, 61.0, 1.0))
+    >>> scan = Scan(ranges=2.0 / np.cos(angles) + 0.02 * np.sin(7 * angles),
+    ...             angle_min=angles[0], angle_increment=np.radians(1.0))
+    >>> epsilon, score = at_vertex_count([scan], MapperParams(), 4.0, method="default")
+    >>> score.vertices_per_scan
+    4.0
+    """
+    if method not in EXTRACTORS:
+        raise ValueError(
+            f"at_vertex_count: unknown method {method!r}; choose from {list(EXTRACTORS)}"
+        )
+    if not vertices_per_scan > 0.0:
+        raise ValueError(
+            f"at_vertex_count: vertices_per_scan must be > 0, got {vertices_per_scan!r}"
+        )
+
+    def score(epsilon: float) -> RayScore:
+        return evaluate_scans(scans, EXTRACTORS[method](params.replace(epsilon=epsilon)),
+                              every=every, max_range=params.max_range)
+
+    low, high = (math.log(bound) for bound in VERTEX_MATCH_BRACKET)
+    best: tuple[float, float, RayScore] | None = None
+    for _ in range(VERTEX_MATCH_STEPS):
+        middle = 0.5 * (low + high)
+        result = score(math.exp(middle))
+        miss = abs(result.vertices_per_scan - vertices_per_scan)
+        if best is None or miss < best[0]:
+            best = (miss, math.exp(middle), result)
+        # More vertices than wanted: the tolerance must grow.
+        if result.vertices_per_scan > vertices_per_scan:
+            low = middle
+        else:
+            high = middle
+    assert best is not None  # VERTEX_MATCH_STEPS > 0
+    return best[1], best[2]

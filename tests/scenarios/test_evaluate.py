@@ -54,3 +54,21 @@ def test_evaluate_bad_options_exit_2_with_one_line(capsys, tmp_path, log, args, 
 def test_evaluate_missing_log(capsys, tmp_path):
     assert main(["evaluate", str(tmp_path / "none.log")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_evaluate_shows_ples_published_figures_on_its_logs(capsys, tmp_path):
+    log = tmp_path / "intel-corrected.log.gz"
+    write_carmen(synthetic_log(seed=4, noise=0.01), log)
+    out = tmp_path / "evaluation"
+    assert main(["evaluate", str(log), "--sweep", "0.02", "--out", str(out)]) == 0
+    assert "published (Schaefer et al. 2018)" in capsys.readouterr().out
+    published = json.loads((out / "evaluation.json").read_text())["published"]
+    assert published["log"] == "intel"
+    assert published["ple_plus_rmse_m"][-1] == pytest.approx(0.0077)
+
+
+def test_evaluate_has_no_published_figures_for_other_logs(capsys, tmp_path, log):
+    out = tmp_path / "evaluation"
+    assert main(["evaluate", str(log), "--sweep", "0.02", "--out", str(out)]) == 0
+    assert "Schaefer" not in capsys.readouterr().out
+    assert json.loads((out / "evaluation.json").read_text())["published"] is None

@@ -7,7 +7,9 @@ import pytest
 import shapely
 
 from semistatic.evaluation import (
+    EXTRACTORS,
     RayScore,
+    at_vertex_count,
     evaluate_scans,
     ray_errors,
     tolerance_sweep,
@@ -84,6 +86,32 @@ def test_evaluate_scans_pools_squared_errors_and_counts():
 def test_tolerance_sweep_names_the_methods():
     with pytest.raises(ValueError, match="unknown methods"):
         tolerance_sweep([], MapperParams(), [0.03], methods=["ple"])
+
+
+@pytest.mark.parametrize("method", ["paper", "default"])
+def test_at_vertex_count_finds_the_tolerance_of_a_vertex_budget(method):
+    rng = np.random.default_rng(3)
+    room = scene(box((0.0, 0.0), 8.0, 6.0), box((1.5, 1.0), 0.6, 0.4, yaw=0.3))
+    scans = [cast_scan(room, (0.2 * k, -0.1 * k, 0.1 * k), noise=0.01, rng=rng)
+             for k in range(4)]
+    params = MapperParams()
+    # the budget is what some tolerance gives, so it can be met exactly
+    target = evaluate_scans(scans, EXTRACTORS[method](params.replace(epsilon=0.02)))
+    epsilon, score = at_vertex_count(scans, params, target.vertices_per_scan, method=method)
+    assert score.vertices_per_scan == pytest.approx(target.vertices_per_scan, abs=0.25)
+    # the score is that of the tolerance returned, scored again from scratch
+    again = evaluate_scans(scans, EXTRACTORS[method](params.replace(epsilon=epsilon)))
+    assert again == score
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [({"vertices_per_scan": 0.0}, "vertices_per_scan"),
+     ({"vertices_per_scan": 10.0, "method": "ple"}, "unknown method")],
+)
+def test_at_vertex_count_rejects_bad_arguments(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        at_vertex_count([], MapperParams(), **kwargs)
 
 
 def random_scene(rng):
