@@ -54,8 +54,9 @@ class MapperParams:
         confirmed.
     epsilon
         Douglas-Peucker tolerance (m), also used to re-simplify after merge/join. The
-        default is three times the range noise of a Sick LMS100 / S300 class scanner
-        (:func:`semistatic.noise.noise_epsilon`); replay measures the log's noise.
+        default is 2.5 times the range noise of the Sick LMS100 (1.2 cm) that the bundled
+        scenarios simulate; replay sets it to three times the log's measured noise
+        (:func:`semistatic.noise.noise_epsilon`).
     vertex_placement
         ``"fitted"`` (default): total-least-squares edges, vertices at the intersections
         of adjacent fitted lines and on the end readings' beams
