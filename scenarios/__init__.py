@@ -12,9 +12,11 @@ Examples
 from scenarios.layout import lap_worlds, scenario_world, world_for_lap
 from scenarios.load import bundled_scenarios, load_scenario
 from scenarios.spec import ScenarioSpec
+from scenarios.testbench import Testbench
 
 __all__ = [
     "ScenarioSpec",
+    "Testbench",
     "bundled_scenarios",
     "lap_worlds",
     "load_scenario",

@@ -35,7 +35,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robots.presets import PRESETS, get_preset
+from robots.presets import PRESETS, UGVSpec, get_preset
 from scenarios.spec import BoxMove, ScenarioSpec
 from worlds.checks import Clearances, LayoutProblem, layout_problems
 from worlds.errors import MEMORY, SpecError
@@ -50,6 +50,7 @@ __all__ = [
     "enable_people",
     "lap_worlds",
     "robot_footprint",
+    "robot_preset",
     "scenario_world",
     "world_for_lap",
 ]
@@ -196,8 +197,11 @@ def scenario_world(spec: ScenarioSpec) -> WorldSpec:
     return enable_people(_load_world(spec), spec.people, file=spec.source)
 
 
-def lap_worlds(spec: ScenarioSpec) -> tuple[WorldSpec, ...]:
+def lap_worlds(spec: ScenarioSpec, *, world: WorldSpec | None = None) -> tuple[WorldSpec, ...]:
     """Return the world of every lap, ``lap_worlds(spec)[lap - 1]`` for ``lap`` in 1..laps.
+
+    ``world`` (e.g. a :class:`~worlds.spec.WorldSpec` built in code) replaces the world
+    the scenario names; the scenario's people and box moves apply to it.
 
     Examples
     --------
@@ -206,10 +210,39 @@ def lap_worlds(spec: ScenarioSpec) -> tuple[WorldSpec, ...]:
     >>> len(worlds), [len(world.boxes) for world in worlds]
     (5, [3, 3, 3, 2, 3])
     """
-    world = scenario_world(spec)
+    if world is None:
+        world = scenario_world(spec)
+    else:
+        world = enable_people(world, spec.people, file=spec.source)
     return tuple(
         world_for_lap(world, spec.moves, lap, file=spec.source) for lap in range(1, spec.laps + 1)
     )
+
+
+def robot_preset(robot: str | UGVSpec, *, file: str = MEMORY) -> UGVSpec:
+    """Return robot preset ``robot`` (a spec passes through); an unknown name names ``robot``.
+
+    Examples
+    --------
+    >>> robot_preset("pioneer3dx").name
+    'pioneer3dx'
+    >>> robot_preset("pioner3dx", file="s.toml")
+    Traceback (most recent call last):
+    ...
+    worlds.errors.SpecError: s.toml: robot: unknown robot preset 'pioner3dx' \
+(did you mean 'pioneer3dx'?); presets: lgv, pioneer3dx
+    """
+    if isinstance(robot, UGVSpec):
+        return robot
+    try:
+        return get_preset(robot)
+    except KeyError:
+        raise SpecError(
+            file,
+            "robot",
+            f"unknown robot preset {robot!r}{did_you_mean(robot, PRESETS)}; "
+            f"presets: {', '.join(sorted(PRESETS))}",
+        ) from None
 
 
 def robot_footprint(robot: str, *, file: str = MEMORY) -> np.ndarray:
@@ -219,21 +252,8 @@ def robot_footprint(robot: str, *, file: str = MEMORY) -> np.ndarray:
     --------
     >>> robot_footprint("pioneer3dx").shape
     (4, 2)
-    >>> robot_footprint("pioner3dx", file="s.toml")
-    Traceback (most recent call last):
-    ...
-    worlds.errors.SpecError: s.toml: robot: unknown robot preset 'pioner3dx' \
-(did you mean 'pioneer3dx'?); presets: lgv, pioneer3dx
     """
-    try:
-        return np.asarray(get_preset(robot).footprint, dtype=float)
-    except KeyError:
-        raise SpecError(
-            file,
-            "robot",
-            f"unknown robot preset {robot!r}{did_you_mean(robot, PRESETS)}; "
-            f"presets: {', '.join(sorted(PRESETS))}",
-        ) from None
+    return np.asarray(robot_preset(robot, file=file).footprint, dtype=float)
 
 
 def _blamed(

@@ -27,6 +27,7 @@ __all__ = [
     "PERSON_DISTANCE",
     "clip_to_area",
     "detection_scores",
+    "ekf_correction_metrics",
     "localization_metrics",
     "match_polylines_to_boxes",
     "score_lap",
@@ -233,4 +234,45 @@ def localization_metrics(
         "rmse_theta_rad": round(float(np.sqrt((error[:, 2] ** 2).mean())), 6),
         "max_sigma_xy_m": round(float(sigma_xy.max()), 6),
         "nees_mean": round(float(nees.mean()), 4),
+    }
+
+
+def ekf_correction_metrics(
+    corrections: ArrayLike, sigmas: ArrayLike, reinitialized: ArrayLike | None = None
+) -> dict:
+    """Return the EKF corrections' RMS and their shares within 1 and 3 sigma (paper Fig. 5).
+
+    A re-localisation (the filter re-initialised from triangulation at a lap start, when
+    the robot was carried back) is no correction: its jump of metres is left out
+    (``reinitialized`` marks those updates). RMS in m, m, rad per state ``(x, y, theta)``.
+
+    Examples
+    --------
+    >>> corrections = np.array([[0.001, 0.0, 0.0], [3.0, 1.0, 0.5], [-0.001, 0.002, 0.001]])
+    >>> sigmas = np.full((3, 3), 0.0015)
+    >>> stats = ekf_correction_metrics(corrections, sigmas, [False, True, False])
+    >>> stats["updates"], stats["relocalizations"], stats["rms"]
+    (2, 1, [0.001, 0.001414214, 0.000707107])
+    >>> stats["within_1_sigma"], stats["within_3_sigma"]
+    ([1.0, 0.5, 1.0], [1.0, 1.0, 1.0])
+    """
+    corrections = np.asarray(corrections, dtype=float).reshape(-1, 3)
+    sigmas = np.asarray(sigmas, dtype=float).reshape(-1, 3)
+    if reinitialized is None:
+        restarts = np.zeros(len(corrections), dtype=bool)
+    else:
+        restarts = np.asarray(reinitialized, dtype=bool).reshape(-1)
+    kept = ~restarts
+    size = np.abs(corrections[kept])
+    sigma = sigmas[kept]
+    if len(size) == 0:
+        empty = [None, None, None]
+        return {"updates": 0, "relocalizations": int(restarts.sum()), "rms": empty,
+                "within_1_sigma": empty, "within_3_sigma": empty}
+    return {
+        "updates": int(kept.sum()),
+        "relocalizations": int(restarts.sum()),
+        "rms": [round(float(v), 9) for v in np.sqrt(np.mean(size**2, axis=0))],
+        "within_1_sigma": [round(float(v), 4) for v in np.mean(size <= sigma, axis=0)],
+        "within_3_sigma": [round(float(v), 4) for v in np.mean(size <= 3.0 * sigma, axis=0)],
     }

@@ -30,8 +30,14 @@ from scenarios.figures import (
     plot_polygonal_map,
     plot_tangent_histograms,
 )
-from scenarios.metrics import detection_scores, localization_metrics, table1_cm
+from scenarios.metrics import (
+    detection_scores,
+    ekf_correction_metrics,
+    localization_metrics,
+    table1_cm,
+)
 from scenarios.output_dir import stage_and_publish
+from scenarios.policies import policy_name
 from scenarios.runner import RunLog
 
 __all__ = [
@@ -76,6 +82,12 @@ def summarize(log: RunLog) -> dict[str, Any]:
         f"lap_{lap.lap:02d}/{name}": value for lap in laps for name, value in lap.latencies.items()
     }
     localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)
+    history = log.ekf_history
+    if len(history.get("stamp", ())):
+        # Fig. 5's figures: lap-start re-localisations are jumps, not corrections.
+        localization["ekf_corrections"] = ekf_correction_metrics(
+            history["correction"], history["sigma"], history["reinitialized"]
+        )
     wall, engine = log.wall_time_s, log.engine_time_s
     return {
         "scenario": spec.name,
@@ -83,7 +95,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
         "laps": spec.laps,
         "world": log.world.name,
         "robot": log.robot.name,
-        "policy": spec.policy,
+        "policy": policy_name(spec.policy),
         "table1_cm": table1_cm(log.table1_distances),
         "detection": {
             "precision": overall["precision"],
@@ -207,6 +219,7 @@ def _figures(log: RunLog, staging: Path) -> None:
         plot_ekf_corrections(
             history["stamp"], history["correction"], history["sigma"],
             folder / "ekf_corrections.png", title=f"{name}: EKF corrections (paper Fig. 5)",
+            reinitialized=history["reinitialized"],
         )
     if log.example_pair is not None:
         plot_tangent_histograms(
@@ -234,7 +247,8 @@ def write_outputs(
     metrics = summarize(log)
     if comparison is not None:
         other = comparison
-        pair = (metrics, other) if log.spec.policy == "conservative" else (other, metrics)
+        conservative = policy_name(log.spec.policy) == "conservative"
+        pair = (metrics, other) if conservative else (other, metrics)
         metrics["policy_comparison"] = policy_comparison(*pair)
 
     def fill(staging: Path) -> None:

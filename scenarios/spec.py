@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from semistatic.params import MapperParams
 from worlds.errors import MEMORY, SpecError
 from worlds.spec import BOX_SIZE, COORDINATE
-from worlds.validation import bounds, check_fields, safe_name
+from worlds.validation import bounds, check_fields, or_object, safe_name
 
 __all__ = [
     "BOX_ACTIONS",
@@ -183,7 +183,8 @@ class ScenarioSpec:
     seed
         Seed of every random stream (noise, people).
     policy
-        Safety-field policy: ``conservative`` or ``adaptive``.
+        Safety-field policy: ``conservative`` or ``adaptive`` (in code, also a
+        ``scenarios.policies.FieldPolicy`` object).
     description
         Free text.
     people
@@ -209,7 +210,8 @@ class ScenarioSpec:
     robot: str = "pioneer3dx"
     laps: int = field(default=5, metadata=bounds(ge=1, le=MAX_LAPS))
     seed: int = field(default=0, metadata=bounds(ge=0, le=MAX_SEED))
-    policy: str = "conservative"
+    # In code, also a scenarios.policies.FieldPolicy object.
+    policy: str = field(default="conservative", metadata=or_object())
     description: str = ""
     people: tuple[str, ...] = ()
     lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0, le=MAX_LAP_TIMEOUT))
@@ -222,7 +224,8 @@ class ScenarioSpec:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        if self.policy not in POLICIES:
+        # A policy object (scenarios.policies.FieldPolicy) is checked when a run starts.
+        if isinstance(self.policy, str) and self.policy not in POLICIES:
             raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")
         for index, move in enumerate(self.moves):
             if move.lap > self.laps:

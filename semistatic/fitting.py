@@ -12,8 +12,12 @@ corners but moves the vertices onto the surface the readings describe:
    nearly parallel or cross far from the corner reading (then the mean of the corner
    reading's projections onto both lines);
 4. an end vertex is where the end reading's beam (from the sensor origin) crosses the
-   fitted line, unless the beam grazes the line (then the end reading's projection), so
-   the polyline never reaches across the neighbouring beams.
+   fitted line, so the polyline never reaches across the neighbouring beams; the end
+   reading itself when that crossing lies more than the tolerance farther out along the
+   line than the reading (a reading off the line, e.g. on the next face round a box
+   corner seen obliquely, moves the crossing outward by its offset over the tangent of
+   the beam's incidence, past the corner); the end reading's projection when the beam
+   grazes the line.
 
 Each vertex keeps the index of the reading it belongs to (the corner or end reading). One
 compiled kernel (numba) does the work for all polylines of a scan.
@@ -251,16 +255,31 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
                 edge = 0 if vertex == 0 else size - 2
                 mx, my, dx, dy = fits[edge, 0], fits[edge, 1], fits[edge, 2], fits[edge, 3]
                 norm = math.hypot(px, py)
-                if dx != 0.0 or dy != 0.0:
+                sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
+                if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
+                    vx, vy = _project(px, py, mx, my, dx, dy)
+                else:
                     # The beam t * (px, py) / norm crosses the line m + s d where
                     # t = cross(m, d) / cross(beam, d).
-                    sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
-                    if abs(sine) >= MIN_BEAM_SINE:
-                        t = (mx * dy - my * dx) / sine
-                        vx = t * px / norm
-                        vy = t * py / norm
+                    t = (mx * dy - my * dx) / sine
+                    cx = t * px / norm
+                    cy = t * py / norm
+                    # A reading on the surface puts the crossing its range error times
+                    # cos(incidence) along the line from itself: at most about epsilon
+                    # (3 sigma). One off the line (on the next face round a corner, a
+                    # mixed pixel) moves it outward by its offset over tan(incidence),
+                    # past the corner: then the reading itself, on the same beam, marks
+                    # how far the readings reach. Outward: away from the edge's other
+                    # reading.
+                    other = merged[1] if vertex == 0 else merged[size - 2]
+                    outward = (px - x[other]) * dx + (py - y[other]) * dy
+                    beyond = (cx - px) * dx + (cy - py) * dy
+                    if beyond * outward <= epsilon * abs(outward):
+                        vx = cx
+                        vy = cy
                     else:
-                        vx, vy = _project(px, py, mx, my, dx, dy)
+                        vx = px
+                        vy = py
             else:
                 ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[
                     vertex - 1, 2], fits[vertex - 1, 3]

@@ -218,23 +218,35 @@ class LocalMap:
         return bool(shapely.intersects(self.safety_area, geometry))
 
     def update(
-        self,
-        scan: Scan,
-        pose: ArrayLike,
-        *,
-        merge: bool = True,
-        timings: dict[str, float] | None = None,
-        scan_polylines: tuple[Polyline, ...] | None = None,
+        self, scan: Scan, pose: ArrayLike, *, timings: dict[str, float] | None = None
     ) -> UpdateReport:
         """Update the map with one scan taken from sensor ``pose`` (world frame).
 
         See :meth:`semistatic.mapper.PolylineMap.update`; the report's polylines are in
-        the segment frame, and so must ``scan_polylines`` be (e.g. the report of another
-        map of the same segment for the same scan).
+        the segment frame.
         """
-        return self._map.update(
-            scan, self.to_local(pose), merge=merge, timings=timings, scan_polylines=scan_polylines
-        )
+        return self._map.update(scan, self.to_local(pose), timings=timings)
+
+    def associate(
+        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None
+    ) -> UpdateReport:
+        """Associate one scan taken from sensor ``pose`` (world frame) without changing the map.
+
+        See :meth:`semistatic.mapper.PolylineMap.associate`. ``scan_polylines``, when
+        given, are this scan's polylines in the segment frame (e.g. the update report of
+        another map of the same segment for the same scan), so extraction is skipped.
+
+        Examples
+        --------
+        >>> scan = Scan(ranges=np.full(61, 2.0), angle_min=-0.3, angle_increment=0.01)
+        >>> segment = LocalMap(origin=(1.0, 0.0, 0.0))
+        >>> _ = segment.update(scan, (2.0, 0.0, 0.0))
+        >>> [pair.map_id for pair in segment.associate(scan, (2.0, 0.0, 0.0)).associated]
+        [0]
+        >>> len(segment)
+        1
+        """
+        return self._map.associate(scan, self.to_local(pose), scan_polylines=scan_polylines)
 
     def to_geojson(self) -> dict[str, Any]:
         """Return the map as a GeoJSON FeatureCollection in world coordinates.

@@ -306,13 +306,7 @@ class PolylineMap:
         self._next_id = max(self._next_id, entry.id + 1, 0 if next_id is None else next_id)
 
     def update(
-        self,
-        scan: Scan,
-        pose: ArrayLike,
-        *,
-        merge: bool = True,
-        timings: dict[str, float] | None = None,
-        scan_polylines: tuple[Polyline, ...] | None = None,
+        self, scan: Scan, pose: ArrayLike, *, timings: dict[str, float] | None = None
     ) -> UpdateReport:
         """Update the map with one scan (extract, associate, merge, insert, join, life cycle).
 
@@ -322,17 +316,9 @@ class PolylineMap:
             The laser scan; its own ``pose`` field is not used.
         pose
             Sensor pose ``(x, y, theta)`` in this map's frame (e.g. from the EKF).
-        merge
-            ``False`` only associates: the map is not changed at all (no merge, no new
-            polylines, no life cycle), as in the paper's Table 1 experiment; the report
-            still lists the pairs, their distances and the missed ids.
         timings
             If given, the seconds spent in each stage are added to it under ``"extract"``,
             ``"associate"``, ``"merge"``, ``"join"`` and ``"life_cycle"``.
-        scan_polylines
-            The polylines of this very scan from this pose in this map's frame, when
-            another map in the same frame has extracted them already (its report's
-            ``scan_polylines``): extraction is then skipped.
 
         Returns
         -------
@@ -344,45 +330,16 @@ class PolylineMap:
         >>> world = PolylineMap()
         >>> world.update(scan, (1.0, 0.0, 0.0)).new_ids
         (0,)
-        >>> report = world.update(scan, (1.0, 0.0, 0.0), merge=False)
-        >>> [(pair.scan_index, pair.map_id, round(pair.distance, 3)) for pair in report.associated]
-        [(0, 0, 0.0)]
         """
         clock = _StageClock(timings)
         params = self.params
-        pose = np.asarray(pose, dtype=float).reshape(3)
-        if not np.isfinite(pose).all():
-            raise ValueError(f"PolylineMap.update: pose must be a finite (x, y, theta), got {pose}")
+        pose = _finite_pose(pose, "update")
         stamp = scan.stamp
-        if scan_polylines is None:
-            scan_lines = _map_frame_polylines(scan, params, pose)
-        else:
-            scan_lines = tuple(scan_polylines)
+        scan_lines = _map_frame_polylines(scan, params, pose)
         clock.lap("extract")
-
-        ids = list(self._entries)
-        triples = associate_with_distances(
-            scan_lines,
-            [self._entries[map_id].polyline for map_id in ids],
-            params.gate,
-            viewpoint=pose,
-            mode=params.hausdorff_restriction,
-        )
-        associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
+        associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
         paired_scans = {pair.scan_index for pair in associated}
-        paired_ids = {pair.map_id for pair in associated}
-        unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
-        unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         clock.lap("associate")
-
-        if not merge:
-            missed = tuple(
-                map_id
-                for map_id in unpaired_ids
-                if is_missing(self._entries[map_id].polyline, scan, pose, params)
-            )
-            clock.lap("life_cycle")
-            return UpdateReport(stamp, scan_lines, associated, unassociated, missed_ids=missed)
 
         # Association compares what the scan saw; the map takes the unbiased ends.
         x, y = pose[:2].tolist()
@@ -440,6 +397,67 @@ class PolylineMap:
             deleted_ids=tuple(deleted),
             joined=tuple(joined),
         )
+
+    def associate(
+        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None
+    ) -> UpdateReport:
+        """Associate one scan with the map without changing the map (paper Sec. 6, Table 1).
+
+        No merge, no new polylines, no life cycle: the report lists the validated pairs
+        with their restricted Hausdorff distances, the unassociated scan polylines and the
+        map polylines missed although they should have been visible.
+
+        Parameters
+        ----------
+        scan
+            The laser scan; its own ``pose`` field is not used.
+        pose
+            Sensor pose ``(x, y, theta)`` in this map's frame.
+        scan_polylines
+            The polylines of this very scan from this pose in this map's frame, when
+            another map in the same frame has extracted them already (its update report's
+            ``scan_polylines``); extracted from ``scan`` when omitted.
+
+        Examples
+        --------
+        >>> scan = Scan(ranges=np.full(61, 2.0), angle_min=-0.3, angle_increment=0.01)
+        >>> world = PolylineMap()
+        >>> _ = world.update(scan, (1.0, 0.0, 0.0))
+        >>> report = world.associate(scan, (1.0, 0.0, 0.0))
+        >>> [(pair.scan_index, pair.map_id, round(pair.distance, 3)) for pair in report.associated]
+        [(0, 0, 0.0)]
+        """
+        pose = _finite_pose(pose, "associate")
+        if scan_polylines is None:
+            scan_lines = _map_frame_polylines(scan, self.params, pose)
+        else:
+            scan_lines = tuple(scan_polylines)
+        associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
+        missed = tuple(
+            map_id
+            for map_id in unpaired_ids
+            if is_missing(self._entries[map_id].polyline, scan, pose, self.params)
+        )
+        return UpdateReport(scan.stamp, scan_lines, associated, unassociated, missed_ids=missed)
+
+    def _associated(
+        self, scan_lines: tuple[Polyline, ...], pose: np.ndarray
+    ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
+        """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
+        ids = list(self._entries)
+        triples = associate_with_distances(
+            scan_lines,
+            [self._entries[map_id].polyline for map_id in ids],
+            self.params.gate,
+            viewpoint=pose,
+            mode=self.params.hausdorff_restriction,
+        )
+        associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
+        paired_scans = {pair.scan_index for pair in associated}
+        paired_ids = {pair.map_id for pair in associated}
+        unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
+        unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
+        return associated, unassociated, unpaired_ids
 
     def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
@@ -536,6 +554,13 @@ class PolylineMap:
                     del self._entries[part.id]
                     joined.append((part.id, survivor.id))
         return joined
+
+
+def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
+    pose = np.asarray(pose, dtype=float).reshape(3)
+    if not np.isfinite(pose).all():
+        raise ValueError(f"PolylineMap.{method}: pose must be a finite (x, y, theta), got {pose}")
+    return pose
 
 
 def _map_frame_polylines(

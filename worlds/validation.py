@@ -146,6 +146,21 @@ def safe_name() -> dict[str, bool]:
     return {"safe_name": True}
 
 
+def or_object() -> dict[str, bool]:
+    """Return field metadata for a plain field that code may also set to an object.
+
+    A file only holds the plain value (a policy's name, say); a spec built in Python may
+    pass an object instead (the policy itself), which :func:`check_fields` leaves to the
+    code that uses it.
+
+    Examples
+    --------
+    >>> or_object()
+    {'or_object': True}
+    """
+    return {"or_object": True}
+
+
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
     """Return ``" (did you mean 'x'?)"`` for the closest candidate, or ``""``.
 
@@ -413,12 +428,12 @@ def from_table(
 
 
 @functools.cache
-def _checked_fields(cls: type) -> tuple[tuple[str, Any, Range | None, bool], ...]:
-    """Return ``(name, hint, range, safe name)`` of the fields :func:`check_fields` converts."""
+def _checked_fields(cls: type) -> tuple[tuple[str, Any, Range | None, bool, bool], ...]:
+    """Return ``(name, hint, range, safe name, or object)`` of the fields to convert."""
     hints = typing.get_type_hints(cls)
     return tuple(
         (field.name, hints[field.name], field.metadata.get("range"),
-         field.metadata.get("safe_name", False))
+         field.metadata.get("safe_name", False), field.metadata.get("or_object", False))
         for field in dataclasses.fields(cls)
         if field.init and _is_plain(hints[field.name])
     )
@@ -468,8 +483,10 @@ def check_fields(obj: Any) -> None:
     >>> Wheel(radius=np.float32(0.5)).radius
     0.5
     """
-    for name, hint, valid, path_like in _checked_fields(type(obj)):
+    for name, hint, valid, path_like, or_object_ in _checked_fields(type(obj)):
         if getattr(obj, name) is None and type(None) in typing.get_args(hint):
+            continue
+        if or_object_ and not isinstance(getattr(obj, name), str | int | float | bool):
             continue
         value = convert(hint, _as_toml(getattr(obj, name)), file=MEMORY, key=name, valid=valid)
         if path_like and not SAFE_NAME.fullmatch(value):

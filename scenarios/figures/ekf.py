@@ -20,6 +20,7 @@ from scenarios.figures._common import (
     _output_path,
     _write_png,
 )
+from scenarios.metrics import ekf_correction_metrics
 from semistatic.frames import wrap_angle
 
 __all__ = ["plot_ekf_corrections"]
@@ -115,9 +116,12 @@ def plot_ekf_corrections(
     Three stacked panels share the time axis: each update's correction (posterior minus
     prior) as a stem, the ±1 sigma band shaded and the ±3 sigma bounds dashed. x and y
     are in mm, theta in mrad. Each panel states the RMS correction and how many
-    corrections fall within ±1 and ±3 sigma. A few corrections far larger than the rest
-    (a re-initialisation) are drawn as red triangles on the axis edge, so that they do
-    not flatten the others; the panel says how far they reach.
+    corrections fall within ±1 and ±3 sigma. Re-localisations (``reinitialized``: the
+    jump of the filter re-initialised by triangulation when the robot was carried back
+    to the start) are no corrections: they are drawn as dotted vertical lines only and
+    left out of the statistics and the y range. A few corrections far larger than the
+    rest (a bad association) are drawn as red triangles on the axis edge, so that they
+    do not flatten the others; the panel says how far they reach.
 
     Parameters
     ----------
@@ -172,8 +176,14 @@ got (99, 3)
                 f"reinitialized: expected ({stamps.size},) booleans (one per stamp), got "
                 f"{restarts.dtype} of shape {restarts.shape}"
             )
-    corrections = corrections * EKF_SCALE
+    statistics = ekf_correction_metrics(corrections, sigmas, restarts)
+    # Re-localisations are drawn as lines, not as corrections (they are jumps of metres).
+    kept = ~restarts
+    restart_stamps = stamps[restarts]
+    stamps, corrections, sigmas = stamps[kept], corrections[kept] * EKF_SCALE, sigmas[kept]
     sigmas = sigmas * EKF_SCALE
+    if stamps.size == 0:
+        raise ValueError("corrections: every update is a re-initialisation; nothing to plot")
 
     fig = Figure(figsize=(10.0, 8.0), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
@@ -186,7 +196,7 @@ got (99, 3)
         ax.vlines(stamps, 0.0, correction, color="0.45", lw=0.6)
         ax.plot(stamps, correction, ".", color="black", ms=3, label="correction")
         ax.axhline(0.0, color="black", lw=0.5)
-        for stamp in stamps[restarts]:
+        for stamp in restart_stamps:
             ax.axvline(stamp, color="tab:purple", ls=":", lw=1.2)
         size = np.abs(correction)
         limit, outside = _correction_axis_limit(correction, sigma)
@@ -202,9 +212,9 @@ got (99, 3)
             note += f"up to {largest:.3g} {unit}"
         if limit > 0.0:
             ax.set_ylim(-limit, limit)
-        inside_1 = float(np.mean(size <= sigma))
-        inside_3 = float(np.mean(size <= 3.0 * sigma))
-        rms = float(np.sqrt(np.mean(correction**2)))
+        inside_1 = statistics["within_1_sigma"][column]
+        inside_3 = statistics["within_3_sigma"][column]
+        rms = statistics["rms"][column] * EKF_SCALE
         # Above the panel, not inside it: a text box would hide the early, large corrections.
         ax.set_title(
             f"Δ{state}: RMS {rms:.3g} {unit}; {inside_1:.1%} within ±1σ, "
@@ -219,8 +229,9 @@ got (99, 3)
         Line2D([], [], color="tab:blue", ls="--", lw=1.0, label="±3σ"),
         Line2D([], [], color="black", marker=".", ls="", label="correction"),
     ]
-    if np.any(restarts):
-        handles.append(Line2D([], [], color="tab:purple", ls=":", label="re-initialised"))
+    if restart_stamps.size:
+        label = f"re-localised ({restart_stamps.size}, left out)"
+        handles.append(Line2D([], [], color="tab:purple", ls=":", label=label))
     if clipped_any:
         handles.append(Line2D([], [], color="tab:red", marker="^", ls="", label="beyond the axis"))
     fig.legend(handles=handles, loc="outside lower center", fontsize=8, ncols=len(handles))

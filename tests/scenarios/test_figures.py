@@ -371,8 +371,11 @@ def test_ekf_figure_with_jumps_and_reinitialisations(tmp_path):
     corrections[40] = [0.5, -0.3, 1.0]
     restarts = np.zeros(stamps.size, dtype=bool)
     restarts[40] = True
-    out = plot_ekf_corrections(
-        stamps, corrections, sigmas, tmp_path / "jumps.png", reinitialized=restarts
+    flagged = plot_ekf_corrections(
+        stamps, corrections, sigmas, tmp_path / "relocalised.png", reinitialized=restarts
     )
-    # Both the jump markers and the legend sample are tab:red.
-    assert red_pixels(out) > 50
+    # A re-localisation is no correction: a dotted line, no marker beyond the axis.
+    assert red_pixels(flagged) == 0
+    unflagged = plot_ekf_corrections(stamps, corrections, sigmas, tmp_path / "jumps.png")
+    # An unexplained jump is drawn: both the markers and the legend sample are tab:red.
+    assert red_pixels(unflagged) > 50

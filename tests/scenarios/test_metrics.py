@@ -9,6 +9,7 @@ import shapely
 from scenarios.metrics import (
     clip_to_area,
     detection_scores,
+    ekf_correction_metrics,
     localization_metrics,
     match_polylines_to_boxes,
     score_lap,
@@ -111,3 +112,20 @@ def test_localization_nees_is_three_for_a_consistent_filter():
     metrics = localization_metrics(np.zeros((20000, 3)), errors, covariances)
     assert metrics["nees_mean"] == pytest.approx(3.0, rel=0.05)
     assert metrics["max_sigma_xy_m"] == pytest.approx(0.02)
+
+
+def test_ekf_correction_statistics_leave_the_lap_start_jumps_out():
+    rng = np.random.default_rng(2)
+    sigmas = np.tile([0.002, 0.002, 0.004], (500, 1))
+    corrections = rng.normal(0.0, sigmas)
+    restarts = np.zeros(500, dtype=bool)
+    restarts[[0, 125, 250, 375]] = True
+    corrections[restarts] = [[3.0, -2.0, 1.5]] * 4  # carried back to the start: metres
+    stats = ekf_correction_metrics(corrections, sigmas, restarts)
+    assert (stats["updates"], stats["relocalizations"]) == (496, 4)
+    # Gaussian corrections: RMS near sigma, ~68 % within 1 sigma, ~99.7 % within 3.
+    np.testing.assert_allclose(stats["rms"], [0.002, 0.002, 0.004], rtol=0.1)
+    assert all(0.62 < share < 0.74 for share in stats["within_1_sigma"])
+    assert all(share > 0.98 for share in stats["within_3_sigma"])
+    with_jumps = ekf_correction_metrics(corrections, sigmas)
+    assert with_jumps["rms"][0] > 0.2  # what the figure used to show

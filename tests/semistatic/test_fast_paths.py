@@ -522,23 +522,20 @@ def test_keep_box_prefilter_changes_nothing(monkeypatch):
         np.testing.assert_array_equal(entry.polyline.points, unfiltered[map_id].polyline.points)
 
 
-def test_update_with_polylines_extracted_by_another_map_is_the_same():
+def test_association_with_polylines_extracted_by_another_map_is_the_same():
     rng = np.random.default_rng(8)
     world = _hall()
     poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(6)]
     scans = [cast_scan(world, pose, noise=0.01, rng=rng) for pose in poses]
-    builder, plain, reusing = PolylineMap(), PolylineMap(), PolylineMap()
+    builder, reference = PolylineMap(), PolylineMap()
+    reference.update(scans[0], poses[0])
     for scan, pose in zip(scans, poses, strict=True):
         report = builder.update(scan, pose)
-        expected = plain.update(scan, pose, merge=False)
-        reused = reusing.update(scan, pose, merge=False, scan_polylines=report.scan_polylines)
+        expected = reference.associate(scan, pose)
+        reused = reference.associate(scan, pose, scan_polylines=report.scan_polylines)
         assert expected.associated == reused.associated
         assert expected.missed_ids == reused.missed_ids
-        plain.update(scan, pose)
-        reusing.update(scan, pose, scan_polylines=report.scan_polylines)
-    assert [e.polyline.points.tolist() for e in plain] == [
-        e.polyline.points.tolist() for e in reusing
-    ]
+        assert len(expected.associated) >= 1
 
 
 @pytest.mark.parametrize("seed", range(20))

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import shapely
 
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.fitting import fit_polyline, total_least_squares
@@ -57,13 +58,58 @@ def test_an_inner_vertex_lands_nearer_the_true_corner_than_the_raw_reading():
     assert fitted < 0.6 * raw
 
 
-def test_end_vertices_lie_on_the_end_readings_beams():
-    points = noisy_corner(np.random.default_rng(3))
-    vertices, kept = fit_polyline(points, douglas_peucker(points, 0.03), 0.03)
-    for vertex, reading in ((vertices[0], points[kept[0]]), (vertices[-1], points[kept[-1]])):
+def expected_end_vertex(edge, epsilon):
+    """The end vertex of ``edge`` (readings, the end reading first) by SVD and a 2x2 solve."""
+    centroid, direction = svd_line(edge)
+    reading = edge[0]
+    # beam: t * reading = centroid + s * direction
+    t, _ = np.linalg.solve(np.column_stack((reading, -direction)), centroid)
+    crossing = t * reading
+    outward = np.sign((reading - edge[-1]) @ direction) * direction
+    return crossing if (crossing - reading) @ outward <= epsilon else reading
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_end_vertices_are_the_beam_crossing_unless_it_reaches_past_the_end_reading(seed):
+    # epsilon 1 cm at 1 cm noise: both rules are exercised over the seeds
+    points = noisy_corner(np.random.default_rng(seed))
+    vertices, kept = fit_polyline(points, douglas_peucker(points, 0.03), 0.01)
+    first = points[kept[0] : kept[1] + 1]
+    last = points[kept[-2] : kept[-1] + 1][::-1]
+    np.testing.assert_allclose(vertices[0], expected_end_vertex(first, 0.01), atol=1e-9)
+    np.testing.assert_allclose(vertices[-1], expected_end_vertex(last, 0.01), atol=1e-9)
+    for vertex, reading in ((vertices[0], first[0]), (vertices[-1], last[0])):
         cross = vertex[0] * reading[1] - vertex[1] * reading[0]
-        assert abs(cross) < 1e-12 * np.hypot(*reading) + 1e-12
+        assert abs(cross) < 1e-12 * np.hypot(*reading) + 1e-12  # on the end reading's beam
         assert vertex @ reading > 0.0  # the same side of the sensor
+
+
+def test_a_box_corner_seen_obliquely_does_not_stretch_the_face_past_it():
+    # sim2's carton_bend at the end of the chicane: the scan's first beams graze the
+    # box's near face beyond its corner, within epsilon of the far face's line, so one
+    # polyline holds both; the first beam's crossing with the fitted face ran 8 cm past
+    # the corner while the noise is 1 cm
+    center, side = (3.6, -1.6), 0.5
+    segments = scene(box(center, side, side))
+    outline = shapely.Polygon(box_corners(center, side, side)).exterior
+    corner = shapely.Point(center[0] + side / 2, center[1] + side / 2)
+    for heading in (0.478, 0.5):
+        for seed in range(30):
+            pose = (4.064, -0.549, heading)
+            scan = cast_scan(segments, pose, noise=0.01, rng=np.random.default_rng(seed))
+            # the polyline that starts at the scan's first beam (others are isolated
+            # noise-split readings of the far face)
+            (line,) = [line for line in extract_polylines(scan) if line.scan_indices[0] == 0]
+            cos, sin = np.cos(heading), np.sin(heading)
+            world = line.points @ np.array([[cos, sin], [-sin, cos]]) + pose[:2]
+            first = scan.ranges[0] * np.array(
+                [np.cos(heading + scan.angle_min), np.sin(heading + scan.angle_min)]
+            ) + pose[:2]
+            # the geometry under test: the first reading lies on the near face, by the corner
+            assert first[0] < corner.x
+            assert first[1] > corner.y - 0.03
+            for end in (world[0], world[-1]):
+                assert outline.distance(shapely.Point(end)) < 0.03
 
 
 def test_adjacent_edges_one_line_fits_are_merged():

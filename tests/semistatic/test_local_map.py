@@ -105,9 +105,7 @@ def test_association_only_changes_nothing():
     local_map = segment_map()
     local_map.update(cast_scan(scene(INSIDE), SENSOR), SENSOR)
     before = dict(local_map.entries)
-    report = local_map.update(
-        cast_scan(scene(INSIDE, world_box((1.5, -0.5))), SENSOR), SENSOR, merge=False
-    )
+    report = local_map.associate(cast_scan(scene(INSIDE, world_box((1.5, -0.5))), SENSOR), SENSOR)
     assert dict(local_map.entries) == before
     assert len(report.associated) == 1
 

@@ -199,10 +199,8 @@ def test_association_only_leaves_the_map_unchanged():
     before = {entry.id: entry for entry in mapper}
     rng = np.random.default_rng(1)
     pose = jitter(rng)
-    report = mapper.update(
-        cast_scan(scene(WALL, box((1.0, -2.5), 0.3, 0.3)), pose, noise=0.01, rng=rng),
-        pose,
-        merge=False,
+    report = mapper.associate(
+        cast_scan(scene(WALL, box((1.0, -2.5), 0.3, 0.3)), pose, noise=0.01, rng=rng), pose
     )
     assert {entry.id: entry for entry in mapper} == before
     assert len(report.associated) == 1
@@ -266,8 +264,8 @@ def test_nasty_scans_go_through_update(name):
     mapper = PolylineMap()
     mapper.add([[1.0, 0.2], [1.0, 0.6]])
     mapper.add([[1.5, -0.5]])
-    for merge in (False, True):
-        report = mapper.update(NASTY_SCANS[name], ORIGIN, merge=merge)
+    for method in (mapper.associate, mapper.update):
+        report = method(NASTY_SCANS[name], ORIGIN)
         assert set(report.deleted_ids) <= {0, 1}
     # nan readings tell nothing: they never make a polyline visible.
     if name == "all_nan":

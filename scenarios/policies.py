@@ -1,0 +1,303 @@
+"""Safety-field policies: which laser readings count against a segment's fields.
+
+The paper leaves the use of the local maps to "the developers of the navigation system";
+a policy is that choice. At every safety scan the :class:`~scenarios.testbench.Testbench`
+hands the policy a :class:`FieldView` (the readings in the robot frame, the segment, its
+local map, the EKF pose) and the policy answers with :class:`FieldReadings`: masks of the
+readings that count for the warning field and for the protective field. ``None`` (or
+:data:`ALL_READINGS`) keeps every reading, as a plain safety scanner does.
+
+A policy may reshape or ignore the warning field as it likes (count fewer readings, or
+none), but the protective field cannot be configured away: whatever a policy answers,
+every reading inside the segment's *minimum protective field* (the
+``safety.min_protective_depth`` nearest metres of it,
+:func:`semistatic.adaptation.minimum_protective_field`) counts, so a person in front of
+the robot always stops it.
+
+Write a policy as any object with a ``name`` and a ``counted_readings(view)`` method
+(and, optionally, ``start_lap(local_maps)``, called as each lap starts with the maps of
+the laps before)::
+
+    class IgnoreWarning:
+        name = "ignore-warning"
+
+        def counted_readings(self, view):
+            none = np.zeros(len(view.points), dtype=bool)
+            return FieldReadings(warning=none, protective=None)
+
+Two policies are bundled: ``conservative`` (every reading counts) and ``adaptive`` (the
+readings explained by semi-static objects confirmed in earlier laps do not count).
+
+Examples
+--------
+>>> field_policy("adaptive").name
+'adaptive'
+>>> field_policy("cautious")
+Traceback (most recent call last):
+...
+ValueError: policy: unknown field policy 'cautious'; bundled: conservative, adaptive \
+(or pass an object with name and counted_readings(view))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import shapely
+
+from robots.safety import FieldSet, FieldState, field_occupancy
+from scenarios.segments import PathSegment
+from scenarios.spec import POLICIES, SafetySettings
+from semistatic.adaptation import explained_readings
+from semistatic.frames import transform_points
+from semistatic.local_map import LocalMap
+
+__all__ = [
+    "ALL_READINGS",
+    "AdaptivePolicy",
+    "ConservativePolicy",
+    "FieldPolicy",
+    "FieldReadings",
+    "FieldView",
+    "counted_occupancy",
+    "field_policy",
+    "known_objects",
+    "policy_name",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class FieldView:
+    """What a policy may look at for one safety scan.
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` valid safety-laser end points in the robot frame (x ahead, y left).
+    segment
+        The path segment the robot is on; ``segment.fields`` holds its warning and
+        protective polygons (robot frame).
+    minimum_field
+        The segment's minimum protective field (robot frame): readings inside it always
+        count for the protective field, whatever the policy answers.
+    robot_pose
+        The EKF's robot pose ``(x, y, theta)`` in the world frame.
+    local_map
+        The segment's local map as it stands before this scan's update.
+    settings
+        The scenario's safety settings (``adaptive_margin`` and the others).
+
+    Examples
+    --------
+    >>> from scenarios.load import load_scenario
+    >>> from scenarios.segments import path_segments
+    >>> from worlds import load_world
+    >>> segment = path_segments(load_world("pal1"))[0]
+    >>> view = FieldView(np.zeros((0, 2)), segment, shapely.Polygon(), np.zeros(3),
+    ...                  LocalMap(), load_scenario("pal1").safety)
+    >>> view.segment.name
+    'niches'
+    """
+
+    points: np.ndarray
+    segment: PathSegment
+    minimum_field: shapely.Geometry
+    robot_pose: np.ndarray
+    local_map: LocalMap
+    settings: SafetySettings
+
+
+@dataclass(frozen=True)
+class FieldReadings:
+    """Which readings count for each field: ``(N,)`` boolean masks, ``None`` for all.
+
+    Examples
+    --------
+    >>> FieldReadings(warning=np.array([True, False])).protective is None
+    True
+    """
+
+    warning: np.ndarray | None = None
+    protective: np.ndarray | None = None
+
+
+ALL_READINGS = FieldReadings()
+"""Every reading counts for both fields (a plain safety scanner)."""
+
+
+@runtime_checkable
+class FieldPolicy(Protocol):
+    """The protocol of a field policy (see the module docstring); ``start_lap`` is optional.
+
+    Examples
+    --------
+    >>> isinstance(ConservativePolicy(), FieldPolicy)
+    True
+    """
+
+    name: str
+
+    def counted_readings(self, view: FieldView) -> FieldReadings | None:
+        """Return the readings of ``view.points`` that count for each field."""
+        ...
+
+
+class ConservativePolicy:
+    """Every reading counts: the fields as configured, whatever the local maps know.
+
+    Examples
+    --------
+    >>> ConservativePolicy().counted_readings(None) is None
+    True
+    """
+
+    name = "conservative"
+
+    def counted_readings(self, view: FieldView) -> FieldReadings | None:
+        """Return ``None``: every reading counts for both fields."""
+        return None
+
+
+class AdaptivePolicy:
+    """Readings explained by known semi-static objects do not count (paper Sec. 4).
+
+    At each lap start the policy takes the *confirmed* polylines of every segment's local
+    map (:func:`known_objects`); during the lap, a reading within
+    ``settings.adaptive_margin`` of one of its segment's known objects no longer counts
+    for either field. The known objects stay fixed for the lap: what the robot learns
+    now serves the next lap.
+
+    Examples
+    --------
+    >>> policy = AdaptivePolicy()
+    >>> local_map = LocalMap()
+    >>> _ = local_map.add([[1.0, -1.0], [1.0, 1.0]])
+    >>> policy.start_lap({"a": local_map})
+    >>> policy.known["a"]   # a polyline seen once is not confirmed yet
+    []
+    """
+
+    name = "adaptive"
+
+    def __init__(self) -> None:
+        self.known: dict[str, list[np.ndarray]] = {}
+
+    def start_lap(self, local_maps: Mapping[str, LocalMap]) -> None:
+        """Take the confirmed objects of every segment's map as they stand now."""
+        self.known = {name: known_objects(local_map) for name, local_map in local_maps.items()}
+
+    def counted_readings(self, view: FieldView) -> FieldReadings | None:
+        """Return the readings not explained by a known object of the view's segment."""
+        known = self.known.get(view.segment.name)
+        if not known:
+            return None
+        world_points = transform_points(view.robot_pose, view.points)
+        unexplained = ~explained_readings(world_points, known, view.settings.adaptive_margin)
+        # The warning field keeps what the protective floor keeps: its count includes them.
+        floor = shapely.contains_xy(view.minimum_field, view.points[:, 0], view.points[:, 1])
+        return FieldReadings(warning=unexplained | floor, protective=unexplained)
+
+
+def known_objects(local_map: LocalMap) -> list[np.ndarray]:
+    """Return the confirmed semi-static objects of a local map (world frame) for adaptation.
+
+    Only ``confirmed`` polylines count: seen again after their first scan, so a person
+    who walked past once is not "known" and never shrinks a field.
+
+    Examples
+    --------
+    >>> local_map = LocalMap()
+    >>> _ = local_map.add([[1.0, 0.0], [1.0, 1.0]])
+    >>> known_objects(local_map)
+    []
+    """
+    return [
+        line.points
+        for map_id, line in local_map.world_polylines().items()
+        if local_map[map_id].status == "confirmed"
+    ]
+
+
+_BUNDLED = {"conservative": ConservativePolicy, "adaptive": AdaptivePolicy}
+assert tuple(_BUNDLED) == POLICIES
+
+
+def field_policy(policy: str | FieldPolicy) -> FieldPolicy:
+    """Return a fresh bundled policy by name, or ``policy`` itself if it is a policy object.
+
+    Raises ``ValueError`` naming ``policy`` for an unknown name or an object that does not
+    follow :class:`FieldPolicy`.
+
+    Examples
+    --------
+    >>> field_policy("conservative").name
+    'conservative'
+    >>> custom = ConservativePolicy()
+    >>> field_policy(custom) is custom
+    True
+    """
+    if isinstance(policy, str):
+        if policy not in _BUNDLED:
+            raise ValueError(
+                f"policy: unknown field policy {policy!r}; bundled: {', '.join(POLICIES)} "
+                "(or pass an object with name and counted_readings(view))"
+            )
+        return _BUNDLED[policy]()
+    if not isinstance(policy, FieldPolicy) or not isinstance(policy.name, str):
+        raise ValueError(
+            f"policy: {policy!r} is no field policy: it needs a name (str) and a "
+            "counted_readings(view) method"
+        )
+    return policy
+
+
+def policy_name(policy: str | FieldPolicy) -> str:
+    """Return the name of a policy given by name or as an object.
+
+    Examples
+    --------
+    >>> policy_name("adaptive"), policy_name(ConservativePolicy())
+    ('adaptive', 'conservative')
+    """
+    return policy if isinstance(policy, str) else str(policy.name)
+
+
+def counted_occupancy(
+    points: np.ndarray,
+    fields: FieldSet,
+    minimum_field: shapely.Geometry,
+    readings: FieldReadings | None,
+    min_points: int,
+) -> FieldState:
+    """Count the readings a policy lets count in each field, never less than the floor.
+
+    Every reading inside ``minimum_field`` counts for the protective field whatever
+    ``readings`` says: the stop for a person cannot be configured away.
+
+    Examples
+    --------
+    >>> fields = FieldSet([(0, -1), (2, -1), (2, 1), (0, 1)], [(0, -1), (1, -1), (1, 1), (0, 1)])
+    >>> floor = shapely.box(0.0, -1.0, 0.2, 1.0)
+    >>> points = np.array([[0.1, 0.0], [0.5, 0.0], [1.5, 0.0]])
+    >>> nothing = np.zeros(3, dtype=bool)
+    >>> counted_occupancy(points, fields, floor, FieldReadings(nothing, nothing), 1)
+    FieldState(warning_count=0, protective_count=1, min_points=1)
+    >>> counted_occupancy(points, fields, floor, None, 1)
+    FieldState(warning_count=3, protective_count=2, min_points=1)
+    """
+    if readings is None or (readings.warning is None and readings.protective is None):
+        return field_occupancy(points, fields, min_points)
+    warning = points if readings.warning is None else points[readings.warning]
+    if readings.protective is None:
+        protective = points
+    else:
+        floor = shapely.contains_xy(minimum_field, points[:, 0], points[:, 1])
+        protective = points[np.asarray(readings.protective, dtype=bool) | floor]
+    return FieldState(
+        field_occupancy(warning, fields, min_points).warning_count,
+        field_occupancy(protective, fields, min_points).protective_count,
+        int(min_points),
+    )

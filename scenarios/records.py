@@ -1,0 +1,165 @@
+"""What a closed-loop run records: per lap, per scan and for the whole run.
+
+:class:`~scenarios.testbench.Testbench` fills these as it runs; ``scenarios.metrics`` and
+``scenarios.outputs`` turn them into numbers and files, ``scenarios.bag`` into a ROS 2 bag.
+:class:`Schedule` is the clock every sensor and the controller run on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robots.presets import UGVSpec
+from scenarios.segments import PathSegment
+from scenarios.spec import ScenarioSpec
+from semistatic.local_map import LocalMap
+from semistatic.mapper import UpdateReport
+from semistatic.types import Scan
+from worlds.spec import WorldSpec
+
+__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule"]
+
+
+class Schedule:
+    """Fire at ``rate_hz`` on a physics clock of ``physics_hz``, with no drift.
+
+    Step ``n`` is due when ``floor(n * rate / physics)`` increases, so a 50 Hz task on a
+    240 Hz clock fires 50 times per simulated second, every 4 or 5 steps.
+
+    Examples
+    --------
+    >>> schedule = Schedule(50.0, 240.0)
+    >>> sum(schedule.due(n) for n in range(1, 241))
+    50
+    """
+
+    def __init__(self, rate_hz: float, physics_hz: float) -> None:
+        self.ratio = rate_hz / physics_hz
+
+    def due(self, step: int) -> bool:
+        """Return whether the task runs at physics step ``step`` (counted from 1)."""
+        return math.floor(step * self.ratio + 1e-9) > math.floor((step - 1) * self.ratio + 1e-9)
+
+
+@dataclass
+class LapLog:
+    """What happened in one lap (robot-side figures; scoring observers add the rest).
+
+    Examples
+    --------
+    >>> log = LapLog(lap=2, start_time=30.0)
+    >>> log.completed, log.stops, log.detection
+    (False, 0, {})
+    """
+
+    lap: int
+    start_time: float
+    first_tick: int = 0
+    duration_s: float = 0.0
+    completed: bool = False
+    stops: int = 0
+    slowdowns: int = 0
+    collisions: int = 0
+    safety_scans: int = 0
+    stopped_time_s: float = 0.0
+    slowed_time_s: float = 0.0
+    detection: dict = field(default_factory=dict)
+    false_objects_from_people: int = 0
+    latencies: dict[str, int | None] = field(default_factory=dict)
+    person_stopped_robot: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class ScanRecord:
+    """What the robot knew when one safety-laser scan reached the mapper (for recording).
+
+    Parameters
+    ----------
+    lap
+        The lap, counted from 1.
+    segment
+        Name of the path segment whose local map the scan updated.
+    scan
+        The safety-laser scan; its ``pose`` is the simulator's true sensor pose.
+    odom_pose
+        ``(x, y, theta)`` of the robot from wheel odometry alone, world frame: the
+        increments the EKF predicts with, integrated from the triangulated pose at the
+        lap start, so it drifts as a real robot's odometry does.
+    ekf_pose, ekf_covariance
+        The EKF's robot pose (world frame) and its ``(3, 3)`` covariance over
+        ``(x, y, theta)``: the pose the mapper placed the scan with.
+    polylines
+        The current segment's local map after this scan, world frame, ``(N, 2)`` each.
+    sensor_pose
+        The safety laser's pose from the EKF (world frame): where the mapper placed
+        the scan. ``None`` when unknown.
+    report
+        The :class:`~semistatic.mapper.UpdateReport` of the local-map update (its scan
+        polylines are in the segment frame), or ``None``.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=[1.0, 2.0], angle_min=0.0, angle_increment=0.1, stamp=0.5)
+    >>> record = ScanRecord(lap=1, segment="corridor", scan=scan, odom_pose=np.zeros(3),
+    ...                     ekf_pose=np.zeros(3), ekf_covariance=np.eye(3) * 1e-4,
+    ...                     polylines=(np.array([[0.0, 1.0], [2.0, 1.0]]),))
+    >>> record.segment, len(record.polylines)
+    ('corridor', 1)
+    """
+
+    lap: int
+    segment: str
+    scan: Scan
+    odom_pose: np.ndarray
+    ekf_pose: np.ndarray
+    ekf_covariance: np.ndarray
+    polylines: tuple[np.ndarray, ...] = ()
+    sensor_pose: np.ndarray | None = None
+    report: UpdateReport | None = None
+
+
+@dataclass
+class RunLog:
+    """Everything a run recorded; ``scenarios.metrics`` turns it into numbers.
+
+    The robot's side (poses, laps, maps after each lap, timings) is filled by the
+    :class:`~scenarios.testbench.Testbench`; ``table1_distances``, ``reference_maps``
+    and ``example_pair`` by :class:`~scenarios.observers.Table1Reference`, the lap logs'
+    detection figures and ``truth_after_lap`` by
+    :class:`~scenarios.observers.GroundTruthScoring`.
+
+    Examples
+    --------
+    >>> from scenarios.load import load_scenario
+    >>> from scenarios.layout import scenario_world
+    >>> from robots.presets import get_preset
+    >>> spec = load_scenario("pal1")
+    >>> log = RunLog(spec=spec, world=scenario_world(spec), robot=get_preset(spec.robot),
+    ...              segments=())
+    >>> log.laps, log.sim_time_s
+    ([], 0.0)
+    """
+
+    spec: ScenarioSpec
+    world: WorldSpec
+    robot: UGVSpec
+    segments: tuple[PathSegment, ...]
+    laps: list[LapLog] = field(default_factory=list)
+    stamps: list[float] = field(default_factory=list)
+    true_poses: list[np.ndarray] = field(default_factory=list)
+    estimated_poses: list[np.ndarray] = field(default_factory=list)
+    covariances: list[np.ndarray] = field(default_factory=list)
+    ekf_history: dict[str, np.ndarray] = field(default_factory=dict)
+    table1_distances: dict[str, list[float]] = field(default_factory=dict)
+    reference_maps: dict[str, LocalMap] = field(default_factory=dict)
+    maps_after_lap: list[dict] = field(default_factory=list)
+    truth_after_lap: list[dict[str, np.ndarray]] = field(default_factory=list)
+    example_pair: tuple[np.ndarray, np.ndarray] | None = None
+    mapper_seconds: list[float] = field(default_factory=list)
+    raycast_seconds: list[float] = field(default_factory=list)
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    engine_time_s: float = 0.0

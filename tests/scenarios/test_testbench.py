@@ -1,0 +1,261 @@
+"""The Testbench: life cycle, tick-by-tick equals run(), observers, worlds and policies in code."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from robots.safety import FieldSet
+from scenarios import Testbench, bundled_scenarios
+from scenarios.load import load_scenario
+from scenarios.outputs import summarize
+from scenarios.policies import FieldReadings, FieldView, counted_occupancy
+from scenarios.runner import run_scenario
+from semistatic.adaptation import minimum_protective_field
+from tests.scenarios.tiny_world import write_tiny
+from worlds.errors import MEMORY
+from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
+
+
+def without_performance(metrics):
+    return {key: value for key, value in metrics.items() if key != "performance"}
+
+
+def assert_same_run(first, second):
+    assert without_performance(summarize(first)) == without_performance(summarize(second))
+    assert first.maps_after_lap == second.maps_after_lap
+    assert first.table1_distances == second.table1_distances
+    for name in ("stamps", "true_poses", "estimated_poses", "covariances"):
+        np.testing.assert_array_equal(np.array(getattr(first, name)),
+                                      np.array(getattr(second, name)))
+    for key, values in first.ekf_history.items():
+        np.testing.assert_array_equal(values, second.ekf_history[key])
+
+
+@pytest.fixture(scope="module")
+def tiny_spec(tmp_path_factory):
+    return load_scenario(write_tiny(tmp_path_factory.mktemp("tiny")))
+
+
+@pytest.fixture(scope="module")
+def tiny_log(tiny_spec):
+    return run_scenario(tiny_spec)
+
+
+class Counter:
+    """Counts every hook call and checks what the bench shows at each."""
+
+    def __init__(self):
+        self.calls = {"on_tick": 0, "on_scan": 0, "on_lap_start": [], "on_lap_end": []}
+        self.zones = set()
+
+    def on_tick(self, bench):
+        self.calls["on_tick"] += 1
+        self.zones.add(bench.zone)
+
+    def on_scan(self, bench, record):
+        self.calls["on_scan"] += 1
+        assert record.lap == bench.lap
+        assert record.segment in bench.local_maps
+
+    def on_lap_start(self, bench, lap):
+        self.calls["on_lap_start"].append(lap)
+        # Re-localised at the start: the EKF agrees with the truth to a few cm.
+        assert np.abs(bench.ekf_pose[:2] - bench.true_pose[:2]).max() < 0.05
+
+    def on_lap_end(self, bench, lap_log):
+        self.calls["on_lap_end"].append(lap_log.lap)
+
+
+def test_stepping_tick_by_tick_gives_the_log_of_run(tiny_spec, tiny_log):
+    counter = Counter()
+    with Testbench(tiny_spec) as bench:
+        bench.add_observer(counter)
+        bench.reset()
+        ticks = 0
+        while not bench.done:
+            bench.step()
+            ticks += 1
+        assert_same_run(bench.log, tiny_log)
+        with pytest.raises(RuntimeError, match="reset"):
+            bench.step()
+    assert counter.calls["on_tick"] == ticks
+    assert counter.calls["on_scan"] == sum(lap.safety_scans for lap in tiny_log.laps)
+    assert counter.calls["on_lap_start"] == counter.calls["on_lap_end"] == [1, 2]
+    # The carton reaches into the warning field: the bench showed the slowdown.
+    assert counter.zones == {"free", "warning"}
+
+
+def test_run_lap_returns_each_lap_and_state_is_readable_between(tiny_spec, tiny_log):
+    with Testbench(tiny_spec) as bench:
+        bench.reset()
+        first = bench.run_lap()
+        assert (first.lap, bench.lap) == (1, 2)
+        assert first == tiny_log.laps[0]
+        # After lap 1 the local map of the only segment holds the carton and the walls.
+        assert len(bench.local_maps["corridor"]) >= 1
+        assert bench.ekf_covariance.shape == (3, 3)
+        assert bench.sim_time > first.duration_s
+        second = bench.run_lap()
+        assert second == tiny_log.laps[1]
+        assert bench.done
+        assert_same_run(bench.run(), tiny_log)
+
+
+def test_reset_with_a_seed_starts_over_with_other_noise(tiny_spec, tiny_log):
+    with Testbench(tiny_spec) as bench:
+        bench.reset(seed=tiny_spec.seed + 1)
+        other = bench.run()
+        assert other.spec.seed == tiny_spec.seed + 1
+        assert other.estimated_poses[5].tolist() != tiny_log.estimated_poses[5].tolist()
+        bench.reset()
+        assert_same_run(bench.run(), tiny_log)
+
+
+def test_a_bench_must_be_reset_before_stepping(tiny_spec):
+    bench = Testbench(tiny_spec)
+    with pytest.raises(RuntimeError, match="reset"):
+        bench.step()
+
+
+def code_world() -> WorldSpec:
+    """The tiny world of the TOML test files, built in code."""
+    walls = (
+        WallSpec((-2.5, -1.2), (6.5, -1.2)), WallSpec((-2.5, 1.2), (6.5, 1.2)),
+        WallSpec((-2.5, -1.2), (-2.5, 1.2)), WallSpec((6.5, -1.2), (6.5, 1.2)),
+    )
+    posts = tuple(PostSpec(x, -1.09) for x in (-2.0, 0.0, 2.0, 4.0, 6.0)) + tuple(
+        PostSpec(x, 1.09) for x in (-1.0, 1.0, 3.0, 5.0)
+    ) + (PostSpec(-2.39, 0.3), PostSpec(6.39, -0.3))
+    segment = SegmentSpec(
+        "corridor", 0, 2,
+        warning=((0.25, -0.5), (1.4, -0.5), (1.4, 0.5), (0.25, 0.5)),
+        protective=((0.25, -0.3), (0.6, -0.3), (0.6, 0.3), (0.25, 0.3)),
+    )
+    path = PathSpec(((0.0, 0.0), (1.75, 0.0), (3.5, 0.0)), (segment,), speed=0.4)
+    return WorldSpec(name="tiny", walls=walls, posts=posts,
+                     boxes=(BoxSpec("carton", (0.5, 0.5, 0.6), (2.0, -0.72, 0.0)),),
+                     people=(), path=path)
+
+
+def test_a_world_built_in_code_runs_like_its_file(tiny_spec, tiny_log):
+    with Testbench(tiny_spec, world=code_world()) as bench:
+        log = bench.run()
+    assert log.world.source == MEMORY  # not read from a file
+    # Same walls, posts, box and path as the file: the same run to the last bit.
+    assert_same_run(log, tiny_log)
+
+
+def test_a_box_pushed_mid_lap_is_mapped_where_it_now_stands(tiny_spec):
+    with Testbench(dataclasses.replace(tiny_spec, laps=1), world=code_world()) as bench:
+        bench.reset()
+        while bench.sim_time < 1.0:
+            bench.step()
+        # Before the robot reaches it, the carton is pushed 20 cm towards the wall.
+        bench.move_box("carton", (2.0, -0.92, 0.0))
+        log = bench.run()
+    truth = log.truth_after_lap[0]["carton"]
+    assert truth[:, 1].max() == pytest.approx(-0.67)
+    assert log.laps[0].detection["f1"] == 1.0
+
+
+class IgnoreWarning:
+    """A policy that counts no reading for the warning field."""
+
+    name = "ignore-warning"
+
+    def counted_readings(self, view):
+        return FieldReadings(warning=np.zeros(len(view.points), dtype=bool))
+
+
+class IgnoreEverything:
+    """A policy that tries to count no reading at all: the protective floor must hold."""
+
+    name = "ignore-everything"
+
+    def counted_readings(self, view):
+        nothing = np.zeros(len(view.points), dtype=bool)
+        return FieldReadings(warning=nothing, protective=nothing)
+
+
+def test_a_policy_that_ignores_the_warning_field_never_slows_down(tiny_spec, tiny_log):
+    with Testbench(tiny_spec, policy=IgnoreWarning()) as bench:
+        metrics = summarize(bench.run())
+    assert summarize(tiny_log)["safety"]["slowdowns"] >= tiny_spec.laps
+    assert metrics["safety"]["slowdowns"] == 0
+    assert metrics["safety"]["collisions"] == 0
+    assert metrics["policy"] == "ignore-warning"
+    assert metrics["safety"]["lap_time_s"][0] < summarize(tiny_log)["safety"]["lap_time_s"][0]
+
+
+def test_a_scenario_takes_a_policy_object_and_rejects_other_objects(tiny_spec):
+    spec = dataclasses.replace(tiny_spec, policy=IgnoreWarning())
+    assert Testbench(spec).spec.policy.name == "ignore-warning"
+    with pytest.raises(ValueError, match="no field policy"):
+        Testbench(tiny_spec, policy=object()).reset()
+
+
+def test_an_unknown_robot_preset_names_the_key(tiny_spec):
+    with pytest.raises(Exception, match="robot: unknown robot preset 'pioner3dx'"):
+        Testbench(tiny_spec, robot="pioner3dx")
+
+
+def test_no_policy_can_ignore_what_stands_in_the_minimum_protective_field():
+    fields = FieldSet([(0.2, -0.5), (1.5, -0.5), (1.5, 0.5), (0.2, 0.5)],
+                      [(0.2, -0.3), (0.7, -0.3), (0.7, 0.3), (0.2, 0.3)])
+    floor = minimum_protective_field(fields.protective, 0.15)  # x in [0.2, 0.35]
+    rng = np.random.default_rng(5)
+    points = rng.uniform([0.0, -0.6], [1.6, 0.6], size=(400, 2))
+    counted = IgnoreEverything().counted_readings(
+        FieldView(points, None, floor, np.zeros(3), None, None)
+    )
+    state = counted_occupancy(points, fields, floor, counted, min_points=3)
+    # Hand-counted reference: the floor is the protective box cut at x = 0.35.
+    in_floor = (points[:, 0] >= 0.2) & (points[:, 0] <= 0.35) & (np.abs(points[:, 1]) <= 0.3)
+    assert state.warning_count == 0
+    assert state.protective_count == np.count_nonzero(in_floor) > 3
+    assert state.zone == "protective"
+    plain = counted_occupancy(points, fields, floor, None, min_points=3)
+    in_protective = (points[:, 0] >= 0.2) & (points[:, 0] <= 0.7) & (np.abs(points[:, 1]) <= 0.3)
+    assert plain.protective_count == np.count_nonzero(in_protective)
+
+
+@pytest.mark.slow
+def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b():
+    spec = load_scenario("pal3b", overrides=["laps=1"])
+    with Testbench(spec, policy=IgnoreWarning()) as bench:
+        metrics = summarize(bench.run())
+    safety = metrics["safety"]
+    # The worker walks into the protective field: the warning field was never needed.
+    assert safety["slowdowns"] == 0
+    assert safety["stops_per_lap"][0] >= 1
+    assert safety["collisions"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", bundled_scenarios())
+def test_every_bundled_scenario_repeats_itself_exactly(name):
+    spec = load_scenario(name, overrides=["laps=2"])
+    assert_same_run(run_scenario(spec), run_scenario(spec))
+
+
+class RandomPusher:
+    """Draws from its own stream every tick, as a script moving boxes at random would."""
+
+    def __init__(self):
+        self.draws = 0
+
+    def on_lap_start(self, bench, lap):
+        self.rng = bench.random_stream(f"pusher/lap{lap}")
+
+    def on_tick(self, bench):
+        self.rng.standard_normal(16)
+        self.draws += 16
+
+
+def test_a_script_drawing_random_numbers_leaves_the_robots_noise_alone(tiny_spec, tiny_log):
+    pusher = RandomPusher()
+    with Testbench(tiny_spec) as bench:
+        bench.add_observer(pusher)
+        assert_same_run(bench.run(), tiny_log)
+    assert pusher.draws > 10_000
