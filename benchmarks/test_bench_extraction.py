@@ -15,6 +15,7 @@ import pytest
 import shapely
 
 from benchmarks.timing import median_us as timed_median_us
+from semistatic.evaluation import paper_params
 from semistatic.extraction import (
     _douglas_peucker_lines,
     douglas_peucker,
@@ -145,3 +146,17 @@ def test_metric_speed():
         for a, b in pairs
     ]
     print(f"  {'similarity (no cache)':32s} median over pairs {np.median(cold):7.1f} us")
+
+
+EXTRACTION_BUDGET_MS = 0.3
+
+
+def test_default_extraction_of_a_541_beam_scan_within_budget():
+    # default (fitted vertices, numba kernel) against the paper's pipeline on the same scan
+    scan = room_scan(np.random.default_rng(0))
+    default, paper = MapperParams(), paper_params(MapperParams())
+    extract_polylines(scan, default)  # compile / load the cached kernel
+    default_us = median_us(lambda: extract_polylines(scan, default), 2000)
+    paper_us = median_us(lambda: extract_polylines(scan, paper), 2000)
+    print(f"\nextract_polylines, 541 beams: default {default_us:.0f} us, paper {paper_us:.0f} us")
+    assert default_us <= EXTRACTION_BUDGET_MS * 1000.0

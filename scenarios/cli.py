@@ -17,6 +17,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from scenarios.evaluate import add_parser as add_evaluate_parser
+from scenarios.evaluate import main_evaluate
 from scenarios.output_dir import check_output_dir, stage_and_publish
 from scenarios.progress import count_progress, scan_progress, sim_progress
 from scenarios.tune import add_parser as add_tune_parser
@@ -100,9 +102,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     replay.add_argument("--lenient", action="store_true", help="skip and count malformed lines")
     replay.add_argument(
-        "--auto-noise", action="store_true",
-        help="fit epsilon (>= 3 sigma) and the breakpoint noise (>= sigma) to the range noise "
-             "measured on the first 50 scans",
+        "--auto-noise", action=argparse.BooleanOptionalAction, default=True,
+        help="set epsilon to 3 sigma and the breakpoint noise to >= sigma of the range noise "
+             "measured on the first 50 scans (default); --no-auto-noise keeps the fixed ones",
     )
     replay.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="mapper.KEY=VALUE",
@@ -120,6 +122,7 @@ def _parser() -> argparse.ArgumentParser:
         help="also run each scenario with adaptive fields and compare lap times",
     )
     add_tune_parser(commands)
+    add_evaluate_parser(commands)
     return parser
 
 
@@ -416,7 +419,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     args = _parser().parse_args(argv)
     handlers = {"check": _check, "run": _run, "table": _table, "replay": _replay,
-                "tune": main_tune}
+                "tune": main_tune, "evaluate": main_evaluate}
     try:
         return handlers[args.command](args)
     except (SpecError, InputError) as error:

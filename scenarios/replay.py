@@ -21,11 +21,10 @@ itself: on a log whose poses are right it leaves Table 1 unchanged
 (``tests/scenarios/test_replay.py``).
 
 Logs differ in range noise (ACES about 3.5 times Intel's, 1.7 vs 0.5 cm across surfaces):
-:func:`estimate_range_noise` measures it on the first ``noise_scans`` scans and
-``metrics.json`` reports it. With ``auto_noise`` the thresholds that must sit above the
-noise follow it (:func:`noise_params`: Douglas-Peucker tolerance at least 3 sigma,
-breakpoint noise at least sigma), so that polylines simplify the shape, not the noise; on
-a log as quiet as the defaults assume it changes nothing.
+:func:`semistatic.noise.estimate_range_noise` measures it on the first ``noise_scans`` scans
+and ``metrics.json`` reports it. With ``auto_noise`` (the default) the Douglas-Peucker
+tolerance is three times that noise and the breakpoint noise at least the noise
+(:func:`semistatic.noise.noise_params`), so that polylines simplify the shape, not the noise.
 
 Examples
 --------
@@ -66,6 +65,7 @@ from semistatic.logs import (
     summarize_quality,
 )
 from semistatic.logs.carmen import ReadStats
+from semistatic.noise import NOISE_EPSILON_SIGMAS, estimate_range_noise, noise_params
 from semistatic.params import MapperParams
 from semistatic.types import Scan
 
@@ -87,19 +87,6 @@ NOISE_SCANS = 50
 """Scans at the start of a log on which its range noise is measured (on the Intel and ACES
 logs the first 50 give 0.47 and 1.67 cm, all scans 0.50 and 1.75 cm)."""
 
-NOISE_EPSILON_SIGMAS = 3.0
-"""Douglas-Peucker tolerance in noise sigmas: a straight wall's reading lies beyond 3 sigma
-with probability 0.3 %, so noise alone seldom makes a vertex."""
-
-# Consecutive readings farther apart than this (m) lie on two surfaces (a depth jump), and
-# a triple with such a step is no sample of the noise. 0.3 m is the gap of one-degree beams
-# head-on at 17 m, or at 4 m at 75 deg incidence: beyond what the replay keeps.
-SAME_SURFACE_STEP = 0.3
-
-# The median of |N(0, s)| is 0.6745 s; the distance of a reading from the chord of its two
-# neighbours on a plane surface is e_i - (e_{i-1} + e_{i+1}) / 2: sqrt(1.5) times the noise.
-_MEDIAN_ABS_TO_SIGMA = 1.0 / 0.6744897501960817
-_CHORD_TO_READING = math.sqrt(1.5)
 
 def _rounded(value: float, digits: int) -> float | None:
     """Return ``value`` rounded, or None when it is not finite (JSON has no NaN)."""
@@ -107,14 +94,21 @@ def _rounded(value: float, digits: int) -> float | None:
 
 
 REPLAY_PARAMS = MapperParams(
-    breakpoint_lambda=math.radians(10.0),
+    breakpoint_lambda=math.radians(12.0),
     breakpoint_sigma_r=0.03,
-    min_points=3,
     max_range=8.0,
     hausdorff_restriction="projection",
 )
-"""Mapper thresholds for 1-degree, 80 m logs (CARMEN): wider breakpoint noise, 3-point
-intervals, 8 m range (beyond it a 1-degree beam spacing exceeds 14 cm)."""
+"""Mapper thresholds for 1-degree, 80 m logs (CARMEN): wider breakpoint noise, 8 m range
+(beyond it a 1-degree beam spacing exceeds 14 cm). The Douglas-Peucker tolerance follows
+the log's measured range noise (``ReplayOptions.auto_noise``, the default).
+
+The breakpoint angle is 12 deg: at one-degree beams a surface seen beyond 78 deg incidence
+is split where its readings step apart. Those grazing readings are the noisiest along
+their rays (range noise over the cosine of the incidence), and an edge through them tilts
+the polylines that revisits are compared with. Measured on the real logs (revisit Table 1
+mean of means, intel / aces): 10 deg 4.49 / 4.69 cm, 12 deg 4.41 / 4.49 cm, 15 deg
+4.43 / 4.54 cm; every per-polyline mean under 10 cm only at 12 deg."""
 
 
 REPLAY_ALIGNMENT = AlignmentParams()
@@ -142,7 +136,7 @@ class ReplayOptions:
     max_scans: int | None = None
     align: bool = True
     alignment: AlignmentParams = REPLAY_ALIGNMENT
-    auto_noise: bool = False
+    auto_noise: bool = True
     noise_scans: int = NOISE_SCANS
 
     def __post_init__(self) -> None:
@@ -312,78 +306,6 @@ def open_log(path: str | Path, *, lenient: bool = False,
     return read_carmen(path, lenient=lenient, stats=stats)
 
 
-def estimate_range_noise(scans: Iterable[Scan], params: MapperParams = REPLAY_PARAMS) -> float:
-    """Return the range noise sigma (m) of ``scans``, robust to corners and depth jumps.
-
-    For every three consecutive readings the mapper keeps (valid, within
-    ``params.max_range``, not outliers) that lie on one surface (each step shorter than
-    ``SAME_SURFACE_STEP``), the distance of the middle reading from the chord of the
-    other two; on a plane surface it is normal with sigma ``sqrt(1.5)`` times the noise
-    across the surface, so the noise is ``median / 0.6745 / sqrt(1.5)``. The median
-    ignores the minority of triples at corners and on curved objects. The noise is the
-    one across the surface, which is what the Douglas-Peucker tolerance is compared with.
-
-    Returns ``nan`` when no triple qualifies.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> angles = np.radians(np.arange(-60.0, 60.0, 1.0))
-    >>> rounds = [Scan(ranges=2.0 + rng.normal(0.0, 0.01, angles.size), angle_min=angles[0],
-    ...                angle_increment=np.radians(1.0)) for _ in range(20)]
-    >>> round(estimate_range_noise(rounds) * 100, 1)  # cm; a round wall seen from its centre
-    1.0
-    >>> estimate_range_noise([])
-    nan
-    """
-    distances = []
-    for scan in scans:
-        kept = np.flatnonzero(inlier_mask(scan, params))
-        middle = kept[1:-1][(np.diff(kept)[:-1] == 1) & (np.diff(kept)[1:] == 1)]
-        if middle.size == 0:
-            continue
-        points = scan.points()
-        before, at, after = points[middle - 1], points[middle], points[middle + 1]
-        chord, offset = after - before, at - before
-        length = np.hypot(chord[:, 0], chord[:, 1])
-        cross = np.abs(offset[:, 0] * chord[:, 1] - offset[:, 1] * chord[:, 0])
-        step_in = np.hypot(offset[:, 0], offset[:, 1])
-        step_out = np.hypot(*(after - at).T)
-        same = (step_in < SAME_SURFACE_STEP) & (step_out < SAME_SURFACE_STEP) & (length > 0.0)
-        distances.append(cross[same] / length[same])
-    if not distances or not (values := np.concatenate(distances)).size:
-        return math.nan
-    return float(np.median(values)) * _MEDIAN_ABS_TO_SIGMA / _CHORD_TO_READING
-
-
-def noise_params(params: MapperParams, sigma: float) -> MapperParams:
-    """Return ``params`` with the thresholds that must exceed the range noise fitted to it.
-
-    The Douglas-Peucker tolerance becomes ``max(epsilon, NOISE_EPSILON_SIGMAS * sigma)``:
-    below the noise it keeps noise extremes as vertices (zig-zag walls whose vertices lie
-    2 sigma off the surface). The breakpoint noise becomes ``max(breakpoint_sigma_r,
-    sigma)``. Neither is ever lowered, so a quiet log keeps ``params`` as they are; an
-    unknown (``nan``) sigma changes nothing.
-
-    Examples
-    --------
-    >>> noise_params(REPLAY_PARAMS, 0.005) is REPLAY_PARAMS  # Intel: 0.5 cm
-    True
-    >>> fitted = noise_params(REPLAY_PARAMS, 0.018)  # ACES: 1.8 cm
-    >>> round(fitted.epsilon, 3), fitted.breakpoint_sigma_r
-    (0.054, 0.03)
-    """
-    if math.isnan(sigma):
-        return params
-    if not sigma >= 0.0:
-        raise ValueError(f"noise_params: sigma must be >= 0 m or nan, got {sigma!r}")
-    epsilon = max(params.epsilon, NOISE_EPSILON_SIGMAS * sigma)
-    sigma_r = max(params.breakpoint_sigma_r, sigma)
-    if epsilon == params.epsilon and sigma_r == params.breakpoint_sigma_r:
-        return params
-    return params.replace(epsilon=epsilon, breakpoint_sigma_r=sigma_r)
-
-
 def _tile_key(position: np.ndarray, size: float) -> tuple[int, int]:
     return (math.floor(position[0] / size), math.floor(position[1] / size))
 
@@ -399,7 +321,7 @@ def replay(
     started = time.perf_counter()
     scans = iter(scans)
     first = list(itertools.islice(scans, options.noise_scans))
-    sigma = estimate_range_noise(first, options.params)
+    sigma = estimate_range_noise(first, options.params.max_range)
     params = noise_params(options.params, sigma) if options.auto_noise else options.params
     result = ReplayResult(options, params=params, noise_sigma=sigma)
     qualities = []

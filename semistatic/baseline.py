@@ -172,7 +172,8 @@ def extract_split_and_merge(
 ) -> list[Polyline]:
     """Extract polylines like the paper pipeline, choosing vertices by split-and-merge.
 
-    Invalid readings, outliers and the breakpoint split are exactly those of
+    Invalid readings, outliers (when ``params.outlier_removal``) and the breakpoint split
+    are exactly those of
     :func:`semistatic.extraction.extract_polylines` (same ``params``), so the intervals
     are the same; each is then simplified with :func:`split_and_merge`.
 
@@ -202,7 +203,8 @@ def extract_split_and_merge(
     """
     params = MapperParams() if params is None else params
     valid = remove_invalid(scan, params.max_range)
-    valid = remove_outliers(scan.ranges, valid, params.outlier_k, params.outlier_alpha)
+    if params.outlier_removal:
+        valid = remove_outliers(scan.ranges, valid, params.outlier_k, params.outlier_alpha)
     intervals = split_breakpoints(
         scan, valid, params.breakpoint_lambda, params.breakpoint_sigma_r, params.min_points
     )

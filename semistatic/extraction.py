@@ -30,6 +30,7 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
+from semistatic.fitting import fit_polylines
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline
 from semistatic.types import Scan, beam_directions
@@ -413,7 +414,8 @@ def _extracted_vertices(
     index = np.flatnonzero(remove_invalid(scan, params.max_range))
     # remove_outliers, split_breakpoints and douglas_peucker fused: the same steps on flat
     # arrays, with the checks of the public functions done once (by MapperParams).
-    index = index[~_outliers(scan.ranges[index], params.outlier_k, params.outlier_alpha)]
+    if params.outlier_removal:
+        index = index[~_outliers(scan.ranges[index], params.outlier_k, params.outlier_alpha)]
     nothing = (np.empty((0, 2)), np.empty(0, dtype=np.int64), [0])
     if index.size < params.min_points:
         return nothing
@@ -428,6 +430,10 @@ def _extracted_vertices(
     beams = index[keep]
     points = np.column_stack((x[keep], y[keep]))
     kept = _douglas_peucker_lines(points, line_ids, params.epsilon)
-    # Every line keeps its last point: the lines' cumulative sizes mark their ends.
-    bounds = np.searchsorted(kept, np.flatnonzero(np.diff(line_ids)), side="right").tolist()
-    return points[kept], beams[kept], [0, *bounds, kept.size]
+    if params.vertex_placement == "fitted":
+        vertices, kept, vertex_lines = fit_polylines(points, line_ids, kept, params.epsilon)
+    else:
+        vertices, vertex_lines = points[kept], line_ids[kept]
+    # Every line keeps its last point: where the line number changes, a line ends.
+    bounds = (np.flatnonzero(np.diff(vertex_lines)) + 1).tolist()
+    return vertices, beams[kept], [0, *bounds, kept.size]

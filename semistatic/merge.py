@@ -382,8 +382,87 @@ def _merge_rows(
     return _simplified(_merged(old, new, alpha, tolerance), epsilon)
 
 
+def _cut_at(vertices: list[list[float]], arc: float, keep_head: bool) -> list[list[float]]:
+    """Return the part of a polyline before (``keep_head``) or after arc length ``arc``."""
+    position = 0.0
+    for k, (start, end) in enumerate(itertools.pairwise(vertices)):
+        length = math.dist(start, end)
+        if position + length >= arc:
+            t = (arc - position) / length if length > 0.0 else 0.0
+            cut = [start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1])]
+            return [*vertices[: k + 1], cut] if keep_head else [cut, *vertices[k + 1 :]]
+        position += length
+    return list(vertices) if keep_head else [vertices[-1]]
+
+
+def _past_edge(
+    vertices: list[list[float]], arc: float, point: list[float], tolerance: float,
+    forward: bool,
+) -> bool:
+    """Return whether ``point`` continues the map edge at arc length ``arc`` past its end.
+
+    True when ``point`` projects on that edge's line more than ``tolerance`` beyond the
+    edge's end vertex (before its start vertex when not ``forward``): the scan goes on
+    where the map turns. A point beside the edge (a noisy end) does not count.
+    """
+    position = 0.0
+    edges = list(itertools.pairwise(vertices))
+    for number, (start, end) in enumerate(edges):
+        length = math.dist(start, end)
+        if position + length < arc and number < len(edges) - 1:
+            position += length
+            continue
+        if length == 0.0:
+            return False
+        ux, uy = (end[0] - start[0]) / length, (end[1] - start[1]) / length
+        along = (point[0] - start[0]) * ux + (point[1] - start[1]) * uy
+        return along > length + tolerance if forward else along < -tolerance
+    return False
+
+
+def _contradicted(
+    old: list[list[float]], new: list[list[float]], on_map: _Found, tolerance: float
+) -> list[list[float]] | None:
+    """Return ``old`` without the ends the scan contradicts, or ``None`` if none is.
+
+    Where the scan, past the last (first) of its vertices that agree with the map (within
+    ``tolerance``), runs on straight beyond the end of the map edge they agree on while
+    the map turns away, the two disagree on where the surface goes: the map's end beyond
+    that point is what the scan no longer sees there (a moved object's old face, hidden
+    inside the new footprint). It is cut,
+    and the scan's continuation then extends the map like any longer view. Averaging the
+    two instead would pull scan vertices onto the old face and draw an edge across the
+    object.
+    """
+    arcs, _, distances, before, after = on_map
+    agree = [k for k, distance in enumerate(distances) if distance <= tolerance]
+    if not agree:
+        return None
+    first, last = agree[0], agree[-1]
+    tail = any(
+        distances[k] > tolerance and not after[k]
+        and _past_edge(old, arcs[last], new[k], tolerance, forward=True)
+        for k in range(last + 1, len(arcs))
+    )
+    head = any(
+        distances[k] > tolerance and not before[k]
+        and _past_edge(old, arcs[first], new[k], tolerance, forward=False)
+        for k in range(first)
+    )
+    if not (tail or head):
+        return None
+    cut = old
+    if tail:
+        cut = _cut_at(cut, arcs[last], keep_head=True)
+    if head:
+        cut = _cut_at(cut, arcs[first], keep_head=False)
+    cut = _distinct_rows(cut)
+    return cut if len(cut) >= 2 else None
+
+
 def _merged(
-    old: list[list[float]], new: list[list[float]], alpha: float, tolerance: float
+    old: list[list[float]], new: list[list[float]], alpha: float, tolerance: float,
+    cut: bool = True,
 ) -> list[list[float]]:
     """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 each)."""
     on_map = _found(new, old)
@@ -396,6 +475,8 @@ def _merged(
     ):
         new = new[::-1]
         on_map = tuple(values[::-1] for values in on_map)  # type: ignore[assignment]
+    if cut and (kept := _contradicted(old, new, on_map, tolerance)) is not None:
+        return _merged(kept, new, alpha, tolerance, cut=False)
     arcs, feet, distances, before, after = on_map
     _, scan_feet, scan_distances, scan_before, scan_after = _found(old, new)
 

@@ -23,9 +23,10 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-__all__ = ["HAUSDORFF_RESTRICTIONS", "MapperParams"]
+__all__ = ["HAUSDORFF_RESTRICTIONS", "VERTEX_PLACEMENTS", "MapperParams"]
 
 HAUSDORFF_RESTRICTIONS = ("vertex", "projection")
+VERTEX_PLACEMENTS = ("fitted", "raw")
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,11 @@ class MapperParams:
 
     Extraction (paper Sec. 3.1, DESIGN.md details 1-3)
 
+    outlier_removal
+        Delete statistical outliers (the paper's filter, DESIGN.md detail 1). Off by
+        default: on real scans the readings it deletes are real returns (through a gap,
+        off a thin object), and once deleted a polyline may cross their rays. Kept, an
+        isolated reading breaks the polyline around it and forms no polyline of its own.
     outlier_k
         Half window: statistics over the ``2k+1`` valid ranges centred on each reading.
     outlier_alpha
@@ -43,9 +49,19 @@ class MapperParams:
     breakpoint_sigma_r
         Range noise sigma_r (m) added as ``3 sigma_r`` to the breakpoint distance.
     min_points
-        Intervals with fewer valid points are dropped.
+        Intervals with fewer valid points are dropped. Two by default: small clusters
+        (chair and table legs) are real objects; the life cycle decides whether they are
+        confirmed.
     epsilon
-        Douglas-Peucker tolerance (m), also used to re-simplify after merge/join.
+        Douglas-Peucker tolerance (m), also used to re-simplify after merge/join. The
+        default is 2.5 times the range noise of the Sick LMS100 (1.2 cm) that the bundled
+        scenarios simulate; replay sets it to three times the log's measured noise
+        (:func:`semistatic.noise.noise_epsilon`).
+    vertex_placement
+        ``"fitted"`` (default): total-least-squares edges, vertices at the intersections
+        of adjacent fitted lines and on the end readings' beams
+        (:mod:`semistatic.fitting`). ``"raw"``: the paper's reading, vertices on raw
+        readings.
     max_range
         Readings beyond this (m) are ignored by the mapper (``inf``: the scan's own limit).
 
@@ -64,12 +80,14 @@ class MapperParams:
     """
 
     # extraction
+    outlier_removal: bool = False
     outlier_k: int = 4  # alpha < sqrt(2k) is needed to remove anything (extraction.py)
     outlier_alpha: float = 2.5
     breakpoint_lambda: float = math.radians(10.0)
     breakpoint_sigma_r: float = 0.012
-    min_points: int = 5
+    min_points: int = 2
     epsilon: float = 0.03
+    vertex_placement: Literal["fitted", "raw"] = "fitted"
     max_range: float = math.inf
     # association and map
     gate: float = 0.12
@@ -82,6 +100,8 @@ class MapperParams:
             value = getattr(self, name)
             raise ValueError(f"MapperParams.{name} must be {rule} (got {value!r}): {hint}")
 
+        if not isinstance(self.outlier_removal, bool):
+            fail("outlier_removal", "True or False", "the paper's statistical outlier removal")
         if not (isinstance(self.outlier_k, int) and self.outlier_k >= 1):
             fail("outlier_k", "an integer >= 1", "half width of the outlier window")
         if not self.outlier_alpha > 0:
@@ -94,6 +114,8 @@ class MapperParams:
             fail("min_points", "an integer >= 2", "a polyline needs at least two points")
         if not self.epsilon > 0:
             fail("epsilon", "> 0", "the Douglas-Peucker tolerance in metres, e.g. 0.03")
+        if self.vertex_placement not in VERTEX_PLACEMENTS:
+            fail("vertex_placement", f"one of {VERTEX_PLACEMENTS}", "see DESIGN.md detail 3")
         if not self.max_range > 0:
             fail("max_range", "> 0", "metres, or inf to keep the scan's own limit")
         if not self.gate > 0:

@@ -9,7 +9,9 @@ import tomllib
 from pathlib import Path
 
 import pytest
+import shapely
 
+from scenarios.layout import lap_worlds
 from scenarios.load import bundled_scenarios, load_scenario
 from scenarios.outputs import summarize
 from scenarios.runner import run_scenario
@@ -19,8 +21,15 @@ PAPER_BOUND_CM = 10.0
 
 
 @pytest.fixture(scope="module", params=bundled_scenarios())
-def metrics(request):
-    return request.param, summarize(run_scenario(load_scenario(request.param)))
+def runs(request):
+    spec = load_scenario(request.param)
+    log = run_scenario(spec)
+    return request.param, summarize(log), spec, log
+
+
+@pytest.fixture
+def metrics(runs):
+    return runs[:2]
 
 
 @pytest.mark.accuracy
@@ -43,3 +52,36 @@ def test_matches_the_golden_figures(metrics):
     assert table["mean"]["max"] == pytest.approx(golden["table1_mean_max_cm"], **within_cm)
     assert table["std"]["avg"] == pytest.approx(golden["table1_std_avg_cm"], **within_cm)
     assert result["detection"]["f1"] == pytest.approx(golden["f1"], abs=tolerance["f1"])
+
+
+MOVED_BOX = ("sim1", "carton_aisle")
+# The box's map polyline must follow its visible outline to this (m) after lap 5, and no
+# part of it may lie deeper inside the box than this (m): no edge across the footprint.
+OUTLINE_HAUSDORFF_M = 0.05
+INSIDE_DEPTH_M = 0.03
+
+
+@pytest.mark.accuracy
+def test_a_moved_box_map_follows_its_new_outline(runs):
+    name, _, spec, log = runs
+    if name != MOVED_BOX[0]:
+        pytest.skip(f"the moved-box check runs on {MOVED_BOX[0]}")
+    box = next(b for b in lap_worlds(spec)[-1].boxes if b.name == MOVED_BOX[1])
+    footprint = shapely.Polygon(box.corners())
+    lines = [
+        shapely.LineString(feature["geometry"]["coordinates"])
+        for collection in log.maps_after_lap[-1].values()
+        for feature in collection["features"]
+        if feature["geometry"] is not None
+    ]
+    near = [line for line in lines if line.distance(footprint) < OUTLINE_HAUSDORFF_M]
+    assert len(near) == 1
+    # its visible outline: the faces whose middles the polyline passes near
+    corners = box.corners()
+    faces = [shapely.LineString([corners[k], corners[(k + 1) % len(corners)]])
+             for k in range(len(corners))]
+    visible = [face for face in faces
+               if face.interpolate(0.5, normalized=True).distance(near[0]) < OUTLINE_HAUSDORFF_M]
+    outline = shapely.MultiLineString(visible)
+    assert shapely.hausdorff_distance(near[0], outline) < OUTLINE_HAUSDORFF_M
+    assert near[0].intersection(footprint.buffer(-INSIDE_DEPTH_M)).length == 0.0

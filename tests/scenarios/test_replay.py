@@ -182,7 +182,7 @@ def test_cli_align_flag(capsys, tmp_path, flag):
     assert (metrics["alignment"] is not None) is aligned
 
 
-@pytest.mark.parametrize("flag", ["--auto-noise", None])
+@pytest.mark.parametrize("flag", ["--auto-noise", "--no-auto-noise"])
 def test_cli_auto_noise_flag(capsys, tmp_path, flag):
     log = tmp_path / "offset.log.gz"
     write_carmen(synthetic_log(seed=4), log)
@@ -191,5 +191,5 @@ def test_cli_auto_noise_flag(capsys, tmp_path, flag):
     assert main(args + ([flag] if flag else [])) == 0
     assert "range noise" in capsys.readouterr().out
     metrics = json.loads((out / "metrics.json").read_text())
-    assert metrics["params"]["auto_noise"] is (flag is not None)
-    assert (metrics["noise"]["rule"] is not None) is (flag is not None)
+    assert metrics["params"]["auto_noise"] is (flag == "--auto-noise")
+    assert (metrics["noise"]["rule"] is not None) is (flag == "--auto-noise")

@@ -26,6 +26,7 @@ from tests.scenarios.test_replay import OPTIONS, synthetic_log
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 AUTO = dataclasses.replace(OPTIONS, auto_noise=True)
+PLAIN = dataclasses.replace(OPTIONS, auto_noise=False)
 
 
 def without_run_details(summary):
@@ -70,51 +71,54 @@ def test_nothing_to_measure_gives_nan(ranges):
     assert math.isnan(estimate_range_noise([]))
 
 
-def test_noise_params_raise_epsilon_and_breakpoint_noise_only_above_the_noise():
-    assert noise_params(REPLAY_PARAMS, 0.004) is REPLAY_PARAMS
+def test_noise_params_follow_the_noise_and_raise_the_breakpoint_noise_only():
     assert noise_params(REPLAY_PARAMS, math.nan) is REPLAY_PARAMS
+    quiet = noise_params(REPLAY_PARAMS, 0.004)
+    assert quiet.epsilon == pytest.approx(NOISE_EPSILON_SIGMAS * 0.004)  # lowered
+    assert quiet.breakpoint_sigma_r == REPLAY_PARAMS.breakpoint_sigma_r  # never lowered
     fitted = noise_params(REPLAY_PARAMS, 0.05)
     assert fitted.epsilon == pytest.approx(NOISE_EPSILON_SIGMAS * 0.05)
     assert fitted.breakpoint_sigma_r == pytest.approx(0.05)
     # Nothing else moves.
     assert fitted.replace(epsilon=REPLAY_PARAMS.epsilon,
                           breakpoint_sigma_r=REPLAY_PARAMS.breakpoint_sigma_r) == REPLAY_PARAMS
-    loose = REPLAY_PARAMS.replace(epsilon=0.2)
-    assert noise_params(loose, 0.02).epsilon == 0.2  # never lowered
+    assert noise_params(REPLAY_PARAMS, 0.0) is REPLAY_PARAMS  # no noise: no tolerance to set
 
 
 def test_noise_params_reject_negative_sigma():
-    with pytest.raises(ValueError, match="noise_params: sigma"):
+    with pytest.raises(ValueError, match="sigma must be >= 0"):
         noise_params(REPLAY_PARAMS, -0.01)
 
 
-def test_auto_noise_leaves_a_quiet_log_alone():
+def test_auto_noise_is_the_default_and_reported():
+    assert ReplayOptions().auto_noise
     scans = synthetic_log(seed=6, noise=0.005)
-    plain, auto = replay(scans, OPTIONS).summary(), replay(scans, AUTO).summary()
-    assert auto["params"]["epsilon_m"] == REPLAY_PARAMS.epsilon
-    assert without_run_details(auto) == without_run_details(plain)
+    plain, auto = replay(scans, PLAIN).summary(), replay(scans, AUTO).summary()
+    assert auto["params"]["epsilon_m"] == pytest.approx(
+        NOISE_EPSILON_SIGMAS * auto["noise"]["sigma_cm"] / 100.0, abs=1e-5)
+    assert plain["params"]["epsilon_m"] == REPLAY_PARAMS.epsilon
     assert auto["noise"]["rule"] is not None
     assert plain["noise"]["rule"] is None
 
 
 def test_auto_noise_simplifies_the_noise_not_the_shape():
     scans = synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.02)
-    clean = replay(synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0), OPTIONS).summary()
-    plain, auto = replay(scans, OPTIONS).summary(), replay(scans, AUTO).summary()
+    clean = replay(synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0), PLAIN).summary()
+    plain, auto = replay(scans, PLAIN).summary(), replay(scans, AUTO).summary()
     sigma = auto["noise"]["sigma_cm"] / 100.0
     assert auto["params"]["epsilon_m"] == pytest.approx(NOISE_EPSILON_SIGMAS * sigma, abs=1e-5)
     # At 3 cm the polylines follow the noise: several times the vertices of the noise-free
     # room. Fitted to the noise they keep the room's corners and little else.
     vertices = {name: s["extraction"]["vertices_per_scan"]
                 for name, s in (("clean", clean), ("plain", plain), ("auto", auto))}
-    assert vertices["plain"] > 4 * vertices["clean"]
+    assert vertices["plain"] > 3 * vertices["clean"]
     assert vertices["clean"] <= vertices["auto"] < 0.5 * vertices["plain"]
     assert auto["extraction"]["coverage"] > 0.95
     assert auto["extraction"]["rms_distance_m"] < sigma * 1.5
 
 
 def test_noise_is_reported_without_auto_noise():
-    summary = replay(synthetic_log(seed=6, noise=0.01), OPTIONS).summary()
+    summary = replay(synthetic_log(seed=6, noise=0.01), PLAIN).summary()
     assert summary["noise"]["scans"] == OPTIONS.noise_scans
     assert 0.7 < summary["noise"]["sigma_cm"] < 1.0
     assert summary["params"]["auto_noise"] is False
@@ -122,9 +126,10 @@ def test_noise_is_reported_without_auto_noise():
 
 @pytest.mark.parametrize("noise_scans", [1, 7, 10_000])
 def test_every_scan_is_replayed_whatever_the_noise_sample(noise_scans):
+    # without auto_noise: the sample only measures the noise, it changes no threshold
     scans = synthetic_log(seed=6)
-    options = dataclasses.replace(OPTIONS, noise_scans=noise_scans)
-    reference = replay(scans, OPTIONS).summary()
+    options = dataclasses.replace(PLAIN, noise_scans=noise_scans)
+    reference = replay(scans, PLAIN).summary()
     summary = replay(iter(scans), options).summary()  # a stream, as open_log gives
     assert summary["scans"] == len(scans)
     assert summary["table1_cm"] == reference["table1_cm"]
@@ -150,15 +155,15 @@ def test_noise_options_are_validated(changes, message):
 @pytest.mark.parametrize(
     ("log", "sigma_cm", "epsilon_m", "table1_cm"),
     [
-        # Intel is as quiet as the defaults assume: nothing changes (4.70 cm either way).
-        ("intel", (0.4, 0.6), (0.03, 0.03), (4.4, 5.0)),
-        # ACES: 1.67 cm noise, epsilon 5.0 cm; 6.10 -> 5.88 cm, still not under 5 cm.
-        ("aces", (1.5, 2.0), (0.045, 0.06), (5.4, 6.05)),
+        # Intel: 0.47 cm noise, epsilon 1.4 cm: 4.58 cm (4.70 with the fixed 3 cm and the
+        # paper's extraction).
+        ("intel", (0.4, 0.6), (0.012, 0.018), (4.3, 4.8)),
+        # ACES: 1.67 cm noise, epsilon 5.0 cm: 4.66 cm (6.10 before).
+        ("aces", (1.5, 2.0), (0.045, 0.06), (4.4, 4.9)),
     ],
 )
 def test_real_logs_with_auto_noise(log, sigma_cm, epsilon_m, table1_cm):
-    summary = replay(open_log(DATA / f"{log}-corrected.log.gz"),
-                     ReplayOptions(auto_noise=True)).summary()
+    summary = replay(open_log(DATA / f"{log}-corrected.log.gz"), ReplayOptions()).summary()
     assert sigma_cm[0] < summary["noise"]["sigma_cm"] < sigma_cm[1]
     assert epsilon_m[0] <= summary["params"]["epsilon_m"] <= epsilon_m[1]
     assert table1_cm[0] < summary["table1_cm"]["mean"]["avg"] < table1_cm[1]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import shapely
 
+from semistatic.evaluation import paper_params, ray_errors
 from semistatic.extraction import (
     MAX_BRIDGED_GAP,
     douglas_peucker,
@@ -314,7 +315,7 @@ def test_all_no_return_and_nasty_scans(nasty_scan):
 
 
 def test_extraction_in_sensor_frame_scan_order_and_within_epsilon(noisy_room_scan):
-    params = MapperParams()
+    params = paper_params(MapperParams())  # raw vertices, outliers removed
     scan = noisy_room_scan
     polylines = extract_polylines(scan, params)
     assert len(polylines) == 5  # wall+hidden corner, box front, far walls, pillar, left wall
@@ -344,7 +345,7 @@ def test_extraction_in_sensor_frame_scan_order_and_within_epsilon(noisy_room_sca
 
 
 def test_batched_simplification_equals_one_douglas_peucker_per_interval():
-    params = MapperParams(epsilon=0.02)
+    params = paper_params(MapperParams(epsilon=0.02))
     for seed in range(5):
         scan = room_scan(np.random.default_rng(seed), noise=0.015)
         valid = remove_outliers(
@@ -376,15 +377,32 @@ def test_extraction_is_deterministic_and_ignores_the_scan_pose():
         np.testing.assert_array_equal(a.scan_indices, b.scan_indices)
 
 
-def test_a_one_beam_dropout_does_not_split_a_wall_but_a_spike_is_not_a_vertex():
+def spiked_wall_scan():
     angles = np.radians(np.arange(-30.0, 30.5, 0.5))
     ranges = 3.0 / np.cos(angles)
     ranges[40] = np.nan  # dropout
-    ranges[80] = 1.2  # isolated spike (removed as outlier with k=4)
-    scan = Scan(ranges=ranges, angle_min=angles[0], angle_increment=np.radians(0.5))
-    lines = extract_polylines(scan, MapperParams(outlier_k=4, outlier_alpha=2.5))
+    ranges[80] = 1.2  # isolated spike: a thin pole, or a stray return
+    return Scan(ranges=ranges, angle_min=angles[0], angle_increment=np.radians(0.5))
+
+
+def test_paper_removal_bridges_a_dropout_and_deletes_a_spike():
+    scan = spiked_wall_scan()
+    params = MapperParams(outlier_removal=True, outlier_k=4, outlier_alpha=2.5)
+    lines = extract_polylines(scan, params)
     assert len(lines) == 1
-    np.testing.assert_array_equal(lines[0].scan_indices, [0, angles.size - 1])
+    np.testing.assert_array_equal(lines[0].scan_indices, [0, scan.ranges.size - 1])
+    # the deleted spike's ray (at 10 deg) now crosses the wall 1.85 m behind its reading
+    assert ray_errors(scan, lines)[80] == pytest.approx(3.0 / np.cos(np.radians(10.0)) - 1.2)
+
+
+def test_a_kept_spike_breaks_the_wall_and_no_polyline_crosses_its_ray():
+    scan = spiked_wall_scan()
+    lines = extract_polylines(scan)
+    assert [line.scan_indices.tolist() for line in lines] == [[0, 79], [81, 120]]
+    errors = ray_errors(scan, lines)
+    assert np.isnan(errors[80])  # no polyline on the spike's ray (one reading, no line)
+    returned = ~np.isinf(errors) & ~np.isnan(errors)
+    assert np.abs(errors[returned]).max() < 1e-9
 
 
 def test_max_range_cuts_far_readings():

@@ -10,6 +10,7 @@ import pytest
 from semistatic.extraction import extract_polylines
 from semistatic.hausdorff import hausdorff
 from semistatic.mapper import MapPolyline, PolylineMap
+from semistatic.noise import noise_params
 from semistatic.params import MapperParams
 from semistatic.types import Scan
 from semistatic.visibility import (
@@ -69,6 +70,27 @@ def test_merge_converges_on_an_unchanged_box_and_wall():
     assert hausdorff(mapper[wall_id].polyline, WALL_TRUTH) < 0.02
     assert mapper[box_id].hits == 200
     assert mapper[box_id].status == "confirmed"
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_repeated_observations_refine_the_map_outline(seed):
+    """Acceptance: 200 observations at 2 cm noise end within 0.5 cm, half the error at 5."""
+    world = scene(BOX, WALL)
+    params = noise_params(MapperParams(), 0.02)  # epsilon 6 cm: the shape, not the noise
+    rng = np.random.default_rng(seed)
+    mapper = PolylineMap(params)
+    error = {}
+    for k in range(1, 201):
+        pose = jitter(rng)
+        mapper.update(cast_scan(world, pose, noise=0.02, rng=rng, stamp=0.08 * k), pose)
+        if k in (5, 200):
+            assert len(mapper) == 2
+            error[k] = max(
+                hausdorff(mapper[id_nearest(mapper, truth)].polyline, truth)
+                for truth in (BOX_TRUTH, WALL_TRUTH)
+            )
+    assert error[200] < 0.005
+    assert error[200] <= 0.5 * error[5]
 
 
 @pytest.mark.parametrize("miss_limit", [1, 3, 5])
@@ -346,8 +368,10 @@ def drive_along_corridor(mapper, rng):
 def test_corridor_drive_keeps_one_polyline_per_object(mode):
     mapper = PolylineMap(MapperParams(hausdorff_restriction=mode))
     drive_along_corridor(mapper, np.random.default_rng(6))
-    walls = [entry for entry in mapper if entry.polyline.length > 5.0]
-    assert [round(entry.polyline.length) for entry in walls] == [14, 14]
+    walls = [entry.polyline.length for entry in mapper if entry.polyline.length > 5.0]
+    # each 14 m wall is one polyline; its far ends, seen at grazing beams, fall short
+    assert len(walls) == 2
+    assert all(13.0 < length < 14.0 for length in walls)
     # The box: one polyline for the faces seen on the way in, one for its back face seen
     # on the way out (faces that only meet at a corner are not joined).
     assert len(mapper) <= 4

@@ -242,3 +242,30 @@ def test_join_partitions_its_input(lines):
     assert members == list(range(len(lines)))
     for line, _ in groups:
         assert np.all(np.isfinite(line.points))
+
+
+def test_a_moved_box_does_not_draw_a_diagonal_across_its_new_footprint():
+    # sim1's carton_aisle: the old box's right face (x = 3.3, with a bit of its top face)
+    # ends up hidden inside the new footprint after the box moves 0.5 m along +x; the new
+    # top face, seen again and again, continues past the old corner.
+    old_face = [[3.157, -0.423], [3.293, -0.449], [3.294, -0.92]]
+    footprint = shapely.box(3.2, -0.91, 3.8, -0.41)
+    rng = np.random.default_rng(0)
+    line = Polyline(old_face)
+    for hits in range(27, 127):
+        end = rng.uniform(3.5, 3.8)
+        top = np.array([[3.2, -0.41], [end, -0.41]]) + rng.normal(0.0, 0.005, (2, 2))
+        line = merge(line, top, epsilon=0.03, map_weight=hits)
+    curve = shapely.LineString(line.points)
+    assert curve.intersection(footprint.buffer(-0.02)).length == 0.0  # no edge across it
+    visible_top = shapely.LineString([(3.2, -0.41), (3.8, -0.41)])
+    assert shapely.hausdorff_distance(curve, visible_top) < 0.05
+
+
+def test_an_end_the_scan_contradicts_is_cut_and_the_scan_extends_the_map():
+    corner = [[0.0, 0.0], [1.0, 0.0], [1.0, -1.0]]  # a wall turning down at x = 1
+    straight_on = [[0.5, 0.0], [2.0, 0.0]]  # the scan sees the wall go on instead
+    merged = merge(corner, straight_on, epsilon=0.03, map_weight=0.0)
+    np.testing.assert_allclose(merged.points, [[0.0, 0.0], [2.0, 0.0]], atol=1e-12)
+    # a partial view that agrees everywhere leaves the corner alone
+    assert len(merge(corner, [[0.2, 0.01], [0.8, 0.01]], epsilon=0.03)) == 3

@@ -1,0 +1,313 @@
+"""Fitted polyline vertices: total-least-squares edges between Douglas-Peucker corners.
+
+Douglas-Peucker decides *where* a polyline bends; its vertices are raw readings, i.e. the
+noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polyline` keeps the
+corners but moves the vertices onto the surface the readings describe:
+
+1. each edge (the readings between two consecutive corners, both included) is fitted by
+   total least squares (the principal axis of its readings);
+2. adjacent edges are merged while one line fits all their readings within the tolerance
+   (the merge step of split-and-merge): noise makes Douglas-Peucker cut straight walls;
+3. an inner vertex is the intersection of the two adjacent fitted lines, unless they are
+   nearly parallel or cross far from the corner reading (then the mean of the corner
+   reading's projections onto both lines);
+4. an end vertex is where the end reading's beam (from the sensor origin) crosses the
+   fitted line, so the polyline never reaches across the neighbouring beams; the end
+   reading itself when that crossing lies more than the tolerance farther out along the
+   line than the reading (a reading off the line, e.g. on the next face round a box
+   corner seen obliquely, moves the crossing outward by its offset over the tangent of
+   the beam's incidence, past the corner); the end reading's projection when the beam
+   grazes the line.
+
+Each vertex keeps the index of the reading it belongs to (the corner or end reading). One
+compiled kernel (numba) does the work for all polylines of a scan.
+
+Examples
+--------
+>>> x = np.array([1.0, 1.01, 0.99, 1.01, 0.99])  # a noisy wall x = 1 seen at 5 readings
+>>> y = np.array([-0.2, -0.1, 0.0, 0.1, 0.2])
+>>> vertices, corners = fit_polyline(np.column_stack((x, y)), [0, 2, 4], epsilon=0.03)
+>>> vertices.round(3), corners  # one line fits: the middle corner goes
+(array([[ 1.004, -0.201],
+       [ 0.996,  0.201]]), array([0, 4]))
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ["fit_polyline", "fit_polylines", "total_least_squares"]
+
+# Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
+# their intersection is ill-conditioned, so the corner reading's projections are used.
+MIN_CORNER_SINE = math.sin(math.radians(10.0))
+
+# A beam meeting the fitted line at less than this incidence (sin of 10 deg) grazes it: the
+# crossing moves by 1/sin of the line's error, so the end reading's projection is used.
+MIN_BEAM_SINE = math.sin(math.radians(10.0))
+
+# An intersection farther from its corner reading than this share of the shorter adjacent
+# edge (chord) is not where the readings bend: fall back to the projections.
+MAX_CORNER_SHIFT = 0.5
+
+
+def total_least_squares(points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Return the centroid and unit direction of the line fitted to ``points``.
+
+    Total least squares: the line through the centroid along the principal axis of the
+    points, minimising the sum of squared perpendicular distances.
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` points, ``N >= 2`` and not all equal.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(centroid, direction)``, both ``(2,)``; ``direction`` has unit length.
+
+    Examples
+    --------
+    >>> centroid, direction = total_least_squares([[0.0, 1.0], [1.0, 2.0], [2.0, 3.0]])
+    >>> centroid, np.abs(direction).round(4)
+    (array([1., 2.]), array([0.7071, 0.7071]))
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    if points.shape[0] < 2:
+        raise ValueError(f"total_least_squares: needs at least 2 points, got {points.shape[0]}")
+    mx, my, dx, dy = _fit(points[:, 0], points[:, 1], 0, points.shape[0] - 1)
+    if dx == 0.0 and dy == 0.0:
+        raise ValueError("total_least_squares: all points are equal, no line is defined")
+    return np.array([mx, my]), np.array([dx, dy])
+
+
+def fit_polyline(
+    points: ArrayLike, corners: ArrayLike, epsilon: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return fitted vertices of one polyline through ``points`` bending at ``corners``.
+
+    See the module docstring for the steps. ``points`` are in the sensor frame (the beams
+    start at the origin), in scan order.
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` readings of one interval, ``N >= 2``.
+    corners
+        Increasing positions into ``points`` of the Douglas-Peucker vertices, the first
+        and last point included.
+    epsilon
+        Tolerance (m) within which one line must fit the readings of merged edges.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(vertices, kept)``: ``(K, 2)`` fitted vertices and the ``(K,)`` positions into
+        ``points`` of the readings they belong to (a subset of ``corners``).
+
+    Examples
+    --------
+    >>> corner = [[1.0, -0.4], [1.0, -0.2], [1.0, 0.0], [0.8, 0.0], [0.6, 0.0]]
+    >>> vertices, kept = fit_polyline(corner, [0, 2, 4], epsilon=0.01)
+    >>> vertices.round(6) + 0.0, kept
+    (array([[ 1. , -0.4],
+           [ 1. ,  0. ],
+           [ 0.6,  0. ]]), array([0, 2, 4]))
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    if points.shape[0] < 2 or corners.size < 2:
+        raise ValueError("fit_polyline: needs at least 2 points and 2 corners")
+    if corners[0] != 0 or corners[-1] != points.shape[0] - 1 or (np.diff(corners) <= 0).any():
+        raise ValueError(
+            "fit_polyline: corners must increase from 0 to the last point's position"
+        )
+    if not epsilon > 0.0:
+        raise ValueError(f"fit_polyline: epsilon must be > 0 m, got {epsilon!r}")
+    vertices, kept, _ = fit_polylines(points, np.zeros(points.shape[0], np.int64), corners,
+                                      float(epsilon))
+    return vertices, kept
+
+
+def fit_polylines(
+    points: np.ndarray, line_ids: np.ndarray, corners: np.ndarray, epsilon: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the fitted vertices of every polyline of a scan at once.
+
+    Parameters
+    ----------
+    points
+        ``(P, 2)`` float64 readings of all intervals one after the other (sensor frame).
+    line_ids
+        ``(P,)`` int64, non-decreasing interval number of each reading (each interval
+        has at least two readings).
+    corners
+        Increasing int64 positions into ``points`` of the Douglas-Peucker vertices, every
+        interval's first and last reading included.
+    epsilon
+        Merge tolerance (m), ``> 0``.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(vertices, kept, vertex_lines)``: ``(K, 2)`` fitted vertices, the ``(K,)``
+        positions into ``points`` of their readings and the ``(K,)`` interval of each.
+
+    Examples
+    --------
+    >>> points = np.array([[1.0, 0.0], [1.0, 0.1], [2.0, 0.0], [2.0, 0.2], [2.0, 0.4]])
+    >>> vertices, kept, lines = fit_polylines(points, np.array([0, 0, 1, 1, 1]),
+    ...                                       np.array([0, 1, 2, 4]), 0.01)
+    >>> kept, lines
+    (array([0, 1, 2, 4]), array([0, 0, 1, 1]))
+    """
+    return _fit_polylines(
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
+        line_ids, corners, epsilon,
+    )
+
+
+@numba.njit(cache=True)
+def _fit(x, y, first, last):  # pragma: no cover - compiled
+    """Return ``(mx, my, dx, dy)``: centroid and principal direction of readings first..last."""
+    count = last - first + 1
+    mx = 0.0
+    my = 0.0
+    for k in range(first, last + 1):
+        mx += x[k]
+        my += y[k]
+    mx /= count
+    my /= count
+    sxx = 0.0
+    sxy = 0.0
+    syy = 0.0
+    for k in range(first, last + 1):
+        u = x[k] - mx
+        v = y[k] - my
+        sxx += u * u
+        sxy += u * v
+        syy += v * v
+    if sxx + syy == 0.0:
+        return mx, my, 0.0, 0.0
+    angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    return mx, my, math.cos(angle), math.sin(angle)
+
+
+@numba.njit(cache=True)
+def _max_distance(x, y, first, last, mx, my, dx, dy):  # pragma: no cover - compiled
+    """Return the largest perpendicular distance of readings first..last to a line."""
+    worst = 0.0
+    for k in range(first, last + 1):
+        distance = abs((x[k] - mx) * dy - (y[k] - my) * dx)
+        worst = max(worst, distance)
+    return worst
+
+
+@numba.njit(cache=True)
+def _project(px, py, mx, my, dx, dy):  # pragma: no cover - compiled
+    """Return the projection of ``(px, py)`` onto a line."""
+    along = (px - mx) * dx + (py - my) * dy
+    return mx + along * dx, my + along * dy
+
+
+@numba.njit(cache=True)
+def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+    count = corners.size
+    out = np.empty((count, 2))
+    kept = np.empty(count, np.int64)
+    lines = np.empty(count, np.int64)
+    merged = np.empty(count, np.int64)
+    fits = np.empty((count, 4))
+    written = 0
+    start = 0
+    while start < count:
+        stop = start
+        while stop + 1 < count and line_ids[corners[stop + 1]] == line_ids[corners[start]]:
+            stop += 1
+        # Merge step: drop a corner while one line fits its two edges within epsilon.
+        size = 1
+        merged[0] = corners[start]
+        for j in range(start + 1, stop):
+            mx, my, dx, dy = _fit(x, y, merged[size - 1], corners[j + 1])
+            if _max_distance(x, y, merged[size - 1], corners[j + 1], mx, my, dx, dy) > epsilon:
+                merged[size] = corners[j]
+                size += 1
+        merged[size] = corners[stop]
+        size += 1
+        for edge in range(size - 1):
+            mx, my, dx, dy = _fit(x, y, merged[edge], merged[edge + 1])
+            fits[edge, 0] = mx
+            fits[edge, 1] = my
+            fits[edge, 2] = dx
+            fits[edge, 3] = dy
+        for vertex in range(size):
+            reading = merged[vertex]
+            px = x[reading]
+            py = y[reading]
+            vx = px
+            vy = py
+            if vertex == 0 or vertex == size - 1:
+                edge = 0 if vertex == 0 else size - 2
+                mx, my, dx, dy = fits[edge, 0], fits[edge, 1], fits[edge, 2], fits[edge, 3]
+                norm = math.hypot(px, py)
+                sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
+                if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
+                    vx, vy = _project(px, py, mx, my, dx, dy)
+                else:
+                    # The beam t * (px, py) / norm crosses the line m + s d where
+                    # t = cross(m, d) / cross(beam, d).
+                    t = (mx * dy - my * dx) / sine
+                    cx = t * px / norm
+                    cy = t * py / norm
+                    # A reading on the surface puts the crossing its range error times
+                    # cos(incidence) along the line from itself: at most about epsilon
+                    # (3 sigma). One off the line (on the next face round a corner, a
+                    # mixed pixel) moves it outward by its offset over tan(incidence),
+                    # past the corner: then the reading itself, on the same beam, marks
+                    # how far the readings reach. Outward: away from the edge's other
+                    # reading.
+                    other = merged[1] if vertex == 0 else merged[size - 2]
+                    outward = (px - x[other]) * dx + (py - y[other]) * dy
+                    beyond = (cx - px) * dx + (cy - py) * dy
+                    if beyond * outward <= epsilon * abs(outward):
+                        vx = cx
+                        vy = cy
+                    else:
+                        vx = px
+                        vy = py
+            else:
+                ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[
+                    vertex - 1, 2], fits[vertex - 1, 3]
+                bx, by, bdx, bdy = fits[vertex, 0], fits[vertex, 1], fits[vertex, 2], fits[
+                    vertex, 3]
+                sine = adx * bdy - ady * bdx
+                use_projection = abs(sine) < MIN_CORNER_SINE
+                if not use_projection:
+                    # a + s ad = b + u bd  ->  s = cross(b - a, bd) / cross(ad, bd)
+                    s = ((bx - ax) * bdy - (by - ay) * bdx) / sine
+                    vx = ax + s * adx
+                    vy = ay + s * ady
+                    before = merged[vertex - 1]
+                    after = merged[vertex + 1]
+                    chord = min(
+                        math.hypot(px - x[before], py - y[before]),
+                        math.hypot(x[after] - px, y[after] - py),
+                    )
+                    use_projection = math.hypot(vx - px, vy - py) > MAX_CORNER_SHIFT * chord
+                if use_projection:
+                    qx, qy = _project(px, py, ax, ay, adx, ady)
+                    rx, ry = _project(px, py, bx, by, bdx, bdy)
+                    vx = 0.5 * (qx + rx)
+                    vy = 0.5 * (qy + ry)
+            out[written, 0] = vx
+            out[written, 1] = vy
+            kept[written] = reading
+            lines[written] = line_ids[reading]
+            written += 1
+        start = stop + 1
+    return out[:written].copy(), kept[:written].copy(), lines[:written].copy()

@@ -1,0 +1,165 @@
+"""Fitted vertices (semistatic.fitting) against SVD line fits and known geometry."""
+
+import numpy as np
+import pytest
+import shapely
+
+from semistatic.extraction import douglas_peucker, extract_polylines
+from semistatic.fitting import fit_polyline, total_least_squares
+from semistatic.params import MapperParams
+from tests.semistatic.synthetic import box, box_corners, cast_scan, scene, wall
+
+
+def svd_line(points):
+    centroid = points.mean(axis=0)
+    _, _, rows = np.linalg.svd(points - centroid)
+    return centroid, rows[0]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_total_least_squares_matches_an_svd_fit(seed):
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(2, 40))
+    direction = rng.normal(size=2)
+    points = rng.normal(size=(1, 2)) + np.outer(rng.uniform(-2, 2, count), direction)
+    points += rng.normal(0.0, 0.05, points.shape)
+    centroid, unit = total_least_squares(points)
+    expected_centroid, expected_unit = svd_line(points)
+    np.testing.assert_allclose(centroid, expected_centroid, atol=1e-12)
+    assert abs(unit @ expected_unit) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_total_least_squares_rejects_degenerate_input():
+    with pytest.raises(ValueError, match="at least 2"):
+        total_least_squares([[1.0, 2.0]])
+    with pytest.raises(ValueError, match="all points are equal"):
+        total_least_squares([[1.0, 2.0], [1.0, 2.0]])
+
+
+def noisy_corner(rng, noise=0.01, step=0.05):
+    """Readings of a right-angle corner at (2, 0) seen from the origin, in scan order."""
+    along = np.arange(0.0, 0.8 + 1e-9, step)
+    first = np.column_stack((2.0 + 0.0 * along, -0.8 + along))
+    second = np.column_stack((2.0 + 0.6 * along[1:], 0.8 * along[1:]))
+    return np.vstack((first, second)) + rng.normal(0.0, noise, (2 * along.size - 1, 2))
+
+
+def test_an_inner_vertex_lands_nearer_the_true_corner_than_the_raw_reading():
+    fitted_errors, raw_errors = [], []
+    for seed in range(30):
+        points = noisy_corner(np.random.default_rng(seed))
+        corners = douglas_peucker(points, 0.03)
+        vertices, kept = fit_polyline(points, corners, 0.03)
+        inner = np.argmin(np.hypot(*(points[kept] - [2.0, 0.0]).T))
+        fitted_errors.append(np.hypot(*(vertices[inner] - [2.0, 0.0])))
+        raw_errors.append(np.hypot(*(points[kept][inner] - [2.0, 0.0])))
+    fitted = np.sqrt(np.mean(np.square(fitted_errors)))
+    raw = np.sqrt(np.mean(np.square(raw_errors)))
+    assert fitted < 0.6 * raw
+
+
+def expected_end_vertex(edge, epsilon):
+    """The end vertex of ``edge`` (readings, the end reading first) by SVD and a 2x2 solve."""
+    centroid, direction = svd_line(edge)
+    reading = edge[0]
+    # beam: t * reading = centroid + s * direction
+    t, _ = np.linalg.solve(np.column_stack((reading, -direction)), centroid)
+    crossing = t * reading
+    outward = np.sign((reading - edge[-1]) @ direction) * direction
+    return crossing if (crossing - reading) @ outward <= epsilon else reading
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_end_vertices_are_the_beam_crossing_unless_it_reaches_past_the_end_reading(seed):
+    # epsilon 1 cm at 1 cm noise: both rules are exercised over the seeds
+    points = noisy_corner(np.random.default_rng(seed))
+    vertices, kept = fit_polyline(points, douglas_peucker(points, 0.03), 0.01)
+    first = points[kept[0] : kept[1] + 1]
+    last = points[kept[-2] : kept[-1] + 1][::-1]
+    np.testing.assert_allclose(vertices[0], expected_end_vertex(first, 0.01), atol=1e-9)
+    np.testing.assert_allclose(vertices[-1], expected_end_vertex(last, 0.01), atol=1e-9)
+    for vertex, reading in ((vertices[0], first[0]), (vertices[-1], last[0])):
+        cross = vertex[0] * reading[1] - vertex[1] * reading[0]
+        assert abs(cross) < 1e-12 * np.hypot(*reading) + 1e-12  # on the end reading's beam
+        assert vertex @ reading > 0.0  # the same side of the sensor
+
+
+def test_a_box_corner_seen_obliquely_does_not_stretch_the_face_past_it():
+    # sim2's carton_bend at the end of the chicane: the scan's first beams graze the
+    # box's near face beyond its corner, within epsilon of the far face's line, so one
+    # polyline holds both; the first beam's crossing with the fitted face ran 8 cm past
+    # the corner while the noise is 1 cm
+    center, side = (3.6, -1.6), 0.5
+    segments = scene(box(center, side, side))
+    outline = shapely.Polygon(box_corners(center, side, side)).exterior
+    corner = shapely.Point(center[0] + side / 2, center[1] + side / 2)
+    for heading in (0.478, 0.5):
+        for seed in range(30):
+            pose = (4.064, -0.549, heading)
+            scan = cast_scan(segments, pose, noise=0.01, rng=np.random.default_rng(seed))
+            # the polyline that starts at the scan's first beam (others are isolated
+            # noise-split readings of the far face)
+            (line,) = [line for line in extract_polylines(scan) if line.scan_indices[0] == 0]
+            cos, sin = np.cos(heading), np.sin(heading)
+            world = line.points @ np.array([[cos, sin], [-sin, cos]]) + pose[:2]
+            first = scan.ranges[0] * np.array(
+                [np.cos(heading + scan.angle_min), np.sin(heading + scan.angle_min)]
+            ) + pose[:2]
+            # the geometry under test: the first reading lies on the near face, by the corner
+            assert first[0] < corner.x
+            assert first[1] > corner.y - 0.03
+            for end in (world[0], world[-1]):
+                assert outline.distance(shapely.Point(end)) < 0.03
+
+
+def test_adjacent_edges_one_line_fits_are_merged():
+    rng = np.random.default_rng(0)
+    points = np.column_stack((np.full(41, 3.0), np.linspace(-1.0, 1.0, 41)))
+    points[:, 0] += rng.normal(0.0, 0.005, 41)
+    vertices, kept = fit_polyline(points, [0, 10, 20, 30, 40], 0.03)
+    assert kept.tolist() == [0, 40]
+    assert np.abs(vertices[:, 0] - 3.0).max() < 0.01
+    # a tolerance below the noise keeps the corners; collinear lines fall back to the
+    # corner readings' projections instead of an ill-conditioned intersection
+    vertices, kept = fit_polyline(points, [0, 10, 20, 30, 40], 1e-4)
+    assert len(kept) > 2
+    assert np.all(np.hypot(*(vertices - points[kept]).T) < 0.02)
+
+
+def test_fit_polyline_rejects_bad_corners():
+    points = [[1.0, 0.0], [1.0, 0.1], [1.0, 0.2]]
+    with pytest.raises(ValueError, match="corners must increase"):
+        fit_polyline(points, [0, 1], 0.03)
+    with pytest.raises(ValueError, match="epsilon"):
+        fit_polyline(points, [0, 2], 0.0)
+
+
+def test_fitted_box_outline_is_closer_to_the_truth_than_raw_vertices():
+    # a box seen corner-on: two faces; error of the vertices to the box outline
+    segments = scene(box((3.0, 0.0), 1.0, 0.8, yaw=0.5))
+    corners = box_corners((3.0, 0.0), 1.0, 0.8, yaw=0.5)
+    errors = {"fitted": [], "raw": []}
+    for seed in range(20):
+        scan = cast_scan(segments, (0.0, 0.0, 0.0), noise=0.01, rng=np.random.default_rng(seed))
+        for placement, bucket in errors.items():
+            lines = extract_polylines(scan, MapperParams(vertex_placement=placement))
+            assert len(lines) == 1
+            vertices = lines[0].points
+            offsets = vertices[:, None, :] - corners[None]
+            near = np.hypot(offsets[..., 0], offsets[..., 1]).min(axis=1)
+            bucket.append(near[1:-1])  # inner vertices are box corners
+    fitted = np.sqrt(np.mean(np.square(np.concatenate(errors["fitted"]))))
+    raw = np.sqrt(np.mean(np.square(np.concatenate(errors["raw"]))))
+    assert fitted < 0.6 * raw
+
+
+def test_a_two_reading_object_becomes_a_polyline():
+    # a 4 cm pole 3 m ahead, in front of a wall: two beams hit it
+    segments = scene(wall((5.0, -3.0), (5.0, 3.0)), box((3.0, 0.0131), 0.04, 0.04))
+    scan = cast_scan(segments, (0.0, 0.0, 0.0))
+    hits = np.flatnonzero(scan.ranges < 3.1)
+    assert hits.size == 2
+    lines = extract_polylines(scan)
+    assert [line.scan_indices.tolist() for line in lines if line.points[:, 0].max() < 3.1] == [
+        hits.tolist()
+    ]
