@@ -28,6 +28,7 @@ from pathlib import Path
 
 from scenarios.output_dir import check_output_dir, stage_and_publish
 from scenarios.replay import NOISE_SCANS, REPLAY_PARAMS, open_log
+from semistatic.errors import SpecError
 from semistatic.evaluation import EXTRACTORS, RayScore, at_vertex_count, tolerance_sweep
 from semistatic.noise import estimate_range_noise, noise_params
 from semistatic.published import (
@@ -36,7 +37,6 @@ from semistatic.published import (
     published_log,
     published_rmse,
 )
-from worlds.errors import SpecError
 
 __all__ = ["add_parser", "main_evaluate", "score_row"]
 
@@ -99,7 +99,7 @@ def _tolerances(text: str | None) -> list[float]:
 def main_evaluate(args: argparse.Namespace) -> int:
     """Run ``semistatic evaluate``; print the scores and write the sweep (if any).
 
-    Bad input raises :class:`~worlds.errors.SpecError` (the CLI prints it, exit 2).
+    Bad input raises :class:`~semistatic.errors.SpecError` (the CLI prints it, exit 2).
 
     Examples
     --------
@@ -107,7 +107,7 @@ def main_evaluate(args: argparse.Namespace) -> int:
     ...                                  out=None))
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: missing.log: <file>: no such file or directory
+    semistatic.errors.SpecError: missing.log: <file>: no such file or directory
     """
     if args.every < 1:
         raise SpecError(COMMAND_LINE, "--every", f"{args.every}: must be an integer >= 1")
