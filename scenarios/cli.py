@@ -146,9 +146,9 @@ def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
 
 
 def _estimated_sim_time(spec, world) -> float:
-    from robots.path import SplinePath
+    from worlds.checks import build_spline
 
-    return spec.laps * SplinePath(world.path.knots).length / world.path.speed
+    return spec.laps * build_spline(world.path).length / world.path.speed
 
 
 def _check_jobs(jobs: int) -> None:
@@ -165,14 +165,14 @@ def _check_display(gui: bool) -> None:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from robots.path import SplinePath
     from scenarios.layout import lap_worlds
+    from worlds.checks import build_spline
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     if args.out is not None:
         check_output_dir(args.out)
     boxes = [len(lap.boxes) for lap in lap_worlds(spec)]
-    length = SplinePath(world.path.knots).length
+    length = build_spline(world.path).length
     print(
         f"{spec.name}: valid ({spec.source})\n"
         f"  world {world.name}: {len(world.walls)} walls, {len(world.posts)} posts, "
