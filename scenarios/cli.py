@@ -295,11 +295,11 @@ def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dic
 
 
 def _table(args: argparse.Namespace) -> int:
-    from scenarios.load import bundled_scenarios
+    from scenarios.load import paper_scenarios
     from scenarios.table import render_table, write_table
     from scenarios.workers import worker_pool
 
-    names = bundled_scenarios()
+    names = paper_scenarios()
     _check_jobs(args.jobs)
     for name in names:
         _load(name, [], args.laps)  # fail fast on bad input, before any run

@@ -38,7 +38,7 @@ def bundled_worlds() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_worlds()
-    ('pal1', 'pal3', 'sim1', 'sim2')
+    ('pal1', 'pal3', 'sim1', 'sim2', 'warehouse')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.load import bundled_scenarios, load_scenario
+from scenarios.load import load_scenario, paper_scenarios
 from scenarios.outputs import summarize
 from scenarios.runner import run_scenario
 
@@ -18,7 +18,7 @@ GOLDEN = tomllib.loads((Path(__file__).parent / "golden_accuracy.toml").read_tex
 PAPER_BOUND_CM = 10.0
 
 
-@pytest.fixture(scope="module", params=bundled_scenarios())
+@pytest.fixture(scope="module", params=paper_scenarios())
 def metrics(request):
     return request.param, summarize(run_scenario(load_scenario(request.param)))
 
