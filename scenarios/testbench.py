@@ -51,6 +51,7 @@ from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference
 from scenarios.policies import FieldPolicy, FieldView, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord, Schedule
 from scenarios.segments import PathSegment, path_segments, segment_index
+from scenarios.sharing import SegmentPublisher
 from scenarios.spec import ScenarioSpec
 from semistatic.adaptation import minimum_protective_field
 from semistatic.frames import compose
@@ -192,6 +193,8 @@ class Testbench:
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
         self.observers: list = [GroundTruthScoring(), Table1Reference()]
+        if spec.sharing:
+            self.observers.append(SegmentPublisher())
         if self.gui:
             self.observers.append(GuiView())
         self.log: RunLog | None = None
