@@ -41,7 +41,7 @@ def test_run_gui_under_a_virtual_display(tmp_path):
     scenario = write_tiny(tmp_path)
     out = tmp_path / "out"
     command = [*SCREEN, str(Path(sys.executable).parent / "semistatic"), "run", str(scenario),
-               "--gui", "--laps", "1", "--set", "lap_timeout=15", "--no-figures",
+               "--gui", "--laps", "1", "--set", "lap_timeout=3", "--no-figures",
                "--out", str(out)]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
