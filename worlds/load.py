@@ -15,7 +15,7 @@ Examples
 Traceback (most recent call last):
 ...
 worlds.errors.SpecError: sim_1: <file>: not a bundled world (did you mean 'sim1'?) \
-and no such file; bundled worlds: pal1, pal3, sim1, sim2
+and no such file; bundled worlds: pal1, pal3, sim1, sim2, warehouse
 """
 
 from __future__ import annotations

@@ -329,7 +329,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     >>> with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()) as out:
     ...     status = main([tmp])
     >>> status, out.getvalue().count(".png")
-    (0, 4)
+    (0, 5)
     """
     import matplotlib
 
