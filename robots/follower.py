@@ -172,7 +172,9 @@ class ChainedFormFollower:
     progress : float
         Arc length of the current reference (the projection of the last pose).
     done : bool
-        True once the progress came within ``goal_tolerance`` of the path end.
+        True once the progress came within ``goal_tolerance`` of the path end. On a
+        closed path the follower keeps driving (the end is the next lap's start) until
+        :meth:`reset` starts the next lap.
 
     Examples
     --------
@@ -191,8 +193,11 @@ class ChainedFormFollower:
         self.params = FollowerParams() if params is None else params
         self.reset()
 
-    def reset(self, s: float = 0.0) -> None:
+    def reset(self, s: float = 0.0, *, keep_speed: bool = False) -> None:
         """Start over from progress ``s`` (default the path start), standing still.
+
+        ``keep_speed`` keeps the last command for the acceleration limits: the next lap
+        of a closed path, entered at speed.
 
         Examples
         --------
@@ -204,7 +209,8 @@ class ChainedFormFollower:
         """
         self.progress = float(np.clip(s, 0.0, self.path.length))
         self.done = False
-        self._last_command = (0.0, 0.0)
+        if not keep_speed:
+            self._last_command = (0.0, 0.0)
 
     def errors(self, pose: ArrayLike) -> tuple[float, float, float]:
         """Return ``(xe, ye, theta_e)``: the robot's offset from its reference, robot frame.
@@ -281,12 +287,15 @@ class ChainedFormFollower:
         remaining = self.path.length - self.progress
         if remaining <= params.goal_tolerance:
             self.done = True
-        if self.done:
+        closed = self.path.closed
+        if self.done and not closed:
             return self._limit(0.0, 0.0, dt)
 
-        # Brake profile: never faster than the speed from which the robot can still stop
-        # at the path end with max_deceleration.
-        u1r = min(params.speed * speed_scale, math.sqrt(2.0 * params.max_deceleration * remaining))
+        u1r = params.speed * speed_scale
+        if not closed:
+            # Brake profile: never faster than the speed from which the robot can still
+            # stop at the path end with max_deceleration. A closed path has no end.
+            u1r = min(u1r, math.sqrt(2.0 * params.max_deceleration * remaining))
         # The reference pose and curvature from one spline evaluation (as pose + curvature).
         x_ref, y_ref, theta_ref, curvature = self._reference(self.progress)
         u2r = curvature * u1r

@@ -61,7 +61,7 @@ PROJECTION_ITERATIONS = 8
 PROJECTION_TOLERANCE = 1e-11
 # Coarse local minima of the distance refined per query; the best refined one wins.
 PROJECTION_BASINS = 3
-BOUNDARY_TYPES = ("natural", "not-a-knot")
+BOUNDARY_TYPES = ("natural", "not-a-knot", "periodic")
 
 
 class SplinePath:
@@ -75,7 +75,9 @@ class SplinePath:
     bc_type
         End conditions of the spline: ``"natural"`` (default; zero curvature at both ends,
         so the robot starts and stops on a straight stretch) or ``"not-a-knot"`` (the
-        first and last two intervals share one cubic, often a closer fit to a sketch).
+        first and last two intervals share one cubic, often a closer fit to a sketch) or
+        ``"periodic"`` (a closed route: the last knot repeats the first and the spline
+        joins itself C2 there, so it can be driven lap after lap; see ``closed``).
 
     Attributes
     ----------
@@ -115,6 +117,16 @@ class SplinePath:
             raise ValueError(
                 f"SplinePath: bc_type must be one of {BOUNDARY_TYPES}, got {bc_type!r}"
             )
+        if bc_type == "periodic" and (
+            knots.shape[0] < 4 or np.hypot(*(knots[-1] - knots[0])) > MIN_KNOT_SEPARATION
+        ):
+            raise ValueError(
+                "SplinePath: a periodic (closed) path needs at least 4 knots, the last equal "
+                f"to the first; got {knots.shape[0]} knots ending at {knots[-1].tolist()} "
+                f"for a start at {knots[0].tolist()}"
+            )
+        if bc_type == "periodic":
+            knots[-1] = knots[0]  # scipy demands the exact value
         chords = np.hypot(*np.diff(knots, axis=0).T)
         if np.any(chords < MIN_KNOT_SEPARATION):
             index = int(np.argmin(chords))
@@ -170,6 +182,22 @@ class SplinePath:
         # The spline and its derivatives at every coarse sample, where the one-point
         # projection's brackets mostly end: looked up instead of evaluated per query.
         self._coarse_spline = [self._spline_scalar.evaluate(t) for t in self._coarse_t_list]
+
+    @property
+    def closed(self) -> bool:
+        """Return whether the path is a closed loop (``bc_type="periodic"``).
+
+        Its end pose equals its start pose, so a vehicle at the end of one lap is at the
+        start of the next.
+
+        Examples
+        --------
+        >>> square = [(0.0, 0.0), (2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]
+        >>> loop = SplinePath(square, bc_type="periodic")
+        >>> loop.closed, bool(np.allclose(loop.pose(0.0), loop.pose(loop.length)))
+        (True, True)
+        """
+        return self.bc_type == "periodic"
 
     def __repr__(self) -> str:
         return (

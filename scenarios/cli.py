@@ -149,9 +149,9 @@ def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
 
 
 def _estimated_sim_time(spec, world) -> float:
-    from robots.path import SplinePath
+    from worlds.checks import build_spline
 
-    return spec.laps * SplinePath(world.path.knots).length / world.path.speed
+    return spec.laps * build_spline(world.path).length / world.path.speed
 
 
 def _check_jobs(jobs: int) -> None:
@@ -168,14 +168,14 @@ def _check_display(gui: bool) -> None:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from robots.path import SplinePath
     from scenarios.layout import lap_worlds
+    from worlds.checks import build_spline
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     if args.out is not None:
         check_output_dir(args.out)
     boxes = [len(lap.boxes) for lap in lap_worlds(spec)]
-    length = SplinePath(world.path.knots).length
+    length = build_spline(world.path).length
     print(
         f"{spec.name}: valid ({spec.source})\n"
         f"  world {world.name}: {len(world.walls)} walls, {len(world.posts)} posts, "
@@ -298,11 +298,11 @@ def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dic
 
 
 def _table(args: argparse.Namespace) -> int:
-    from scenarios.load import bundled_scenarios
+    from scenarios.load import paper_scenarios
     from scenarios.table import render_table, write_table
     from scenarios.workers import worker_pool
 
-    names = bundled_scenarios()
+    names = paper_scenarios()
     _check_jobs(args.jobs)
     for name in names:
         _load(name, [], args.laps)  # fail fast on bad input, before any run

@@ -386,7 +386,7 @@ def check_scenario_layout(
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
-and no such file; bundled worlds: pal1, pal3, sim1, sim2
+and no such file; bundled worlds: pal1, pal3, sim1, sim2, warehouse
     """
     footprint = robot_footprint(spec.robot, file=spec.source)
     world = scenario_world(spec)

@@ -41,9 +41,11 @@ __all__ = [
     "DATA_DIR",
     "MAPPER_BOUNDS",
     "OVERRIDE_FILE",
+    "PAPER_SCENARIOS",
     "bundled_scenarios",
     "load_scenario",
     "mapper_from_table",
+    "paper_scenarios",
     "parse_override",
     "scenario_from_toml",
     "scenario_path",
@@ -79,9 +81,26 @@ def bundled_scenarios() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_scenarios()
-    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2')
+    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
+
+
+PAPER_SCENARIOS = ("pal1", "pal3a", "pal3b", "sim1", "sim2")
+"""The bundled scenarios that are rows of the paper's Table 1 (``semistatic table``)."""
+
+
+def paper_scenarios() -> tuple[str, ...]:
+    """Return the bundled scenarios that reproduce the paper's Table 1 rows, sorted.
+
+    The others (the warehouse) go beyond the paper's experiments.
+
+    Examples
+    --------
+    >>> paper_scenarios()
+    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2')
+    """
+    return tuple(name for name in bundled_scenarios() if name in PAPER_SCENARIOS)
 
 
 def scenario_path(name_or_path: str | Path) -> Path:
@@ -95,7 +114,7 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
-and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2
+and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse
     """
     text = str(name_or_path)
     names = bundled_scenarios()

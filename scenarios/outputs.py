@@ -28,6 +28,7 @@ from scenarios.figures import (
     plot_ekf_corrections,
     plot_lap_times,
     plot_polygonal_map,
+    plot_sharing_traffic,
     plot_tangent_histograms,
 )
 from scenarios.metrics import (
@@ -89,6 +90,20 @@ def summarize(log: RunLog) -> dict[str, Any]:
             history["correction"], history["sigma"], history["reinitialized"]
         )
     wall, engine = log.wall_time_s, log.engine_time_s
+    extra = {}
+    if log.sharing is not None:
+        sharing = log.sharing
+        extra["sharing"] = {
+            "messages": sharing["messages"],
+            "bytes": sharing["bytes"],
+            "grid_bytes": sharing["grid_bytes"],
+            # Per message, the 5 cm grid of its segment over its encoded size.
+            "grid_ratio_min": min(
+                (grid / size for grid, size in zip(sharing["message_grid_bytes"],
+                                                   sharing["message_bytes"], strict=True)),
+                default=None,
+            ),
+        }
     return {
         "scenario": spec.name,
         "seed": spec.seed,
@@ -128,6 +143,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "raycast_ms_median": _median_ms(log.raycast_seconds),
             "safety_scans": len(log.mapper_seconds),
         },
+        **extra,
     }
 
 
@@ -220,6 +236,12 @@ def _figures(log: RunLog, staging: Path) -> None:
             history["stamp"], history["correction"], history["sigma"],
             folder / "ekf_corrections.png", title=f"{name}: EKF corrections (paper Fig. 5)",
             reinitialized=history["reinitialized"],
+        )
+    if log.sharing is not None and log.sharing["messages"]:
+        sharing = log.sharing
+        plot_sharing_traffic(
+            sharing["stamp"], sharing["message_bytes"], sharing["message_grid_bytes"],
+            folder / "sharing_bytes.png", title=f"{name}: segment maps published",
         )
     if log.example_pair is not None:
         plot_tangent_histograms(

@@ -129,7 +129,8 @@ class RunLog:
     :class:`~scenarios.testbench.Testbench`; ``table1_distances``, ``reference_maps``
     and ``example_pair`` by :class:`~scenarios.observers.Table1Reference`, the lap logs'
     detection figures and ``truth_after_lap`` by
-    :class:`~scenarios.observers.GroundTruthScoring`.
+    :class:`~scenarios.observers.GroundTruthScoring`; ``sharing`` (the segment-map
+    traffic) by :class:`~scenarios.sharing.SegmentPublisher` when the scenario shares.
 
     Examples
     --------
@@ -163,3 +164,4 @@ class RunLog:
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
     engine_time_s: float = 0.0
+    sharing: dict | None = None

@@ -29,6 +29,7 @@ import shapely
 from robots.path import SplinePath
 from robots.safety import FieldSet
 from semistatic.frames import transform_points, untransform_points
+from worlds.checks import build_spline
 from worlds.spec import WorldSpec
 
 __all__ = ["SWEEP_STEP", "PathSegment", "path_segments", "segment_index", "swept_area"]
@@ -75,7 +76,7 @@ def swept_area(
 
 def path_segments(world: WorldSpec, path: SplinePath | None = None) -> tuple[PathSegment, ...]:
     """Return the segments of ``world``'s path with their frames, fields and safety areas."""
-    path = SplinePath(world.path.knots) if path is None else path
+    path = build_spline(world.path) if path is None else path
     segments = []
     for index, spec in enumerate(world.path.segments):
         start_s = float(path.knot_s[spec.start_knot])

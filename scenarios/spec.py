@@ -191,6 +191,9 @@ class ScenarioSpec:
         Names of the world's people to switch on.
     lap_timeout
         Simulated time (s) after which a lap that has not reached the path end fails.
+    sharing
+        Publish each segment's local map to a fleet map store when the vehicle leaves
+        the segment, and report the traffic (``metrics.json`` key ``sharing``).
     rates
         Update rates (table ``[rates]``).
     noise
@@ -215,6 +218,7 @@ class ScenarioSpec:
     description: str = ""
     people: tuple[str, ...] = ()
     lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0, le=MAX_LAP_TIMEOUT))
+    sharing: bool = False
     rates: Rates = field(default_factory=Rates)
     noise: Noise = field(default_factory=Noise)
     safety: SafetySettings = field(default_factory=SafetySettings)

@@ -51,6 +51,7 @@ from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference
 from scenarios.policies import FieldPolicy, FieldView, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord, Schedule
 from scenarios.segments import PathSegment, path_segments, segment_index
+from scenarios.sharing import SegmentPublisher
 from scenarios.spec import ScenarioSpec
 from semistatic.adaptation import minimum_protective_field
 from semistatic.frames import compose
@@ -64,6 +65,7 @@ from sim.people import People
 from sim.random_streams import RandomStreams
 from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
+from worlds.checks import build_spline
 from worlds.spec import BoxSpec, WorldSpec
 
 __all__ = ["RELOCALIZE_ATTEMPTS", "SETTLE_STEPS", "ZONES", "Testbench"]
@@ -191,6 +193,8 @@ class Testbench:
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
         self.observers: list = [GroundTruthScoring(), Table1Reference()]
+        if spec.sharing:
+            self.observers.append(SegmentPublisher())
         if self.gui:
             self.observers.append(GuiView())
         self.log: RunLog | None = None
@@ -230,7 +234,7 @@ class Testbench:
         spec = self.spec if seed is None else dataclasses.replace(self.spec, seed=seed)
         self._worlds = lap_worlds(spec, world=self._world_override)
         base_world = self._worlds[0]
-        path = SplinePath(base_world.path.knots)
+        path = build_spline(base_world.path)
         self.segments: tuple[PathSegment, ...] = path_segments(base_world, path)
         self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec,
                           segments=self.segments)
@@ -542,6 +546,9 @@ class Testbench:
     def _begin_lap(self, lap: int) -> None:
         sim, robot = self._sim, self._robot
         self._apply_layout(self._worlds[lap - 1])
+        if lap > 1 and robot.follower.path.closed:
+            self._continue_loop(lap)
+            return
         robot.body.reset(robot.start)
         sim.step(SETTLE_STEPS)
         robot.encoders.reset(robot.body.wheel_angles())
@@ -549,12 +556,30 @@ class Testbench:
         self._supervisor.reset()
         self._supervisor.set_fields(self.segments[0].fields)
         self._contacts.reset()
+        self._lap_counters = (0, 0, 0)
         self._speed_scale = 1.0
         self._zone = "clear"
         self.lap_log = LapLog(lap=lap, start_time=sim.sim_time, first_tick=len(self.log.stamps))
         self._relocalize(lap)
         # Like the EKF, odometry restarts from the triangulated pose: the robot was carried.
         self._odom_pose = robot.ekf.pose.copy()
+        self._start_lap_hooks(lap)
+
+    def _continue_loop(self, lap: int) -> None:
+        """Start lap ``lap`` of a closed route where the last one ended, at speed.
+
+        The vehicle is not carried anywhere: the EKF keeps tracking, odometry keeps
+        integrating, and the follower's progress wraps from the path end to its start
+        (the same pose on a closed spline).
+        """
+        self._robot.follower.reset(keep_speed=True)
+        stops, slowdowns = self._supervisor.stops, self._supervisor.slowdowns
+        self._lap_counters = (stops, slowdowns, self._contacts.collisions)
+        self.lap_log = LapLog(lap=lap, start_time=self._sim.sim_time,
+                              first_tick=len(self.log.stamps))
+        self._start_lap_hooks(lap)
+
+    def _start_lap_hooks(self, lap: int) -> None:
         start_lap = getattr(self.policy, "start_lap", None)
         if start_lap is not None:
             start_lap(self.local_maps)
@@ -563,12 +588,16 @@ class Testbench:
 
     def _end_lap(self) -> None:
         sim, robot, lap_log, log = self._sim, self._robot, self.lap_log, self.log
-        robot.body.stop()
+        closed = robot.follower.path.closed
+        if not closed or lap_log.lap == log.spec.laps:
+            robot.body.stop()
         lap_log.duration_s = sim.sim_time - lap_log.start_time
         lap_log.completed = robot.follower.done
-        lap_log.stops = self._supervisor.stops
-        lap_log.slowdowns = self._supervisor.slowdowns
-        lap_log.collisions = self._contacts.collisions
+        # On a closed route the counters run on across laps: a lap's events are the change.
+        stops, slowdowns, collisions = self._lap_counters
+        lap_log.stops = self._supervisor.stops - stops
+        lap_log.slowdowns = self._supervisor.slowdowns - slowdowns
+        lap_log.collisions = self._contacts.collisions - collisions
         log.maps_after_lap.append(
             {name: local_map.to_geojson() for name, local_map in self._local_maps.items()}
         )

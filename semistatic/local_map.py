@@ -191,6 +191,25 @@ class LocalMap:
         """
         return self._map.add(polyline, stamp=stamp)
 
+    def restore(self, entry: MapPolyline, *, replace: bool = False) -> None:
+        """Put an entry (segment frame) into the map with its id and state.
+
+        See :meth:`semistatic.mapper.PolylineMap.restore`; ``replace`` overwrites the
+        entry of the same id (e.g. merged with another vehicle's map).
+
+        Examples
+        --------
+        >>> segment = LocalMap()
+        >>> segment.restore(MapPolyline(4, Polyline([[1.0, 0.0], [1.0, 1.0]]), "confirmed", 3))
+        >>> segment.next_id, segment[4].status
+        (5, 'confirmed')
+        """
+        self._map.restore(entry, replace=replace)
+
+    def remove(self, map_id: int) -> None:
+        """Delete polyline ``map_id`` from the map."""
+        self._map.remove(map_id)
+
     def to_local(self, pose: ArrayLike) -> np.ndarray:
         """Return a world pose expressed in the segment frame.
 

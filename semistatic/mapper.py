@@ -287,11 +287,13 @@ class PolylineMap:
         )
         return map_id
 
-    def restore(self, entry: MapPolyline, *, next_id: int | None = None) -> None:
+    def restore(self, entry: MapPolyline, *, next_id: int | None = None,
+                replace: bool = False) -> None:
         """Put back a saved entry with its id and state (e.g. when loading a map).
 
-        Raises ``ValueError`` if the id is taken. ``next_id`` (default: one past the largest
-        id seen) keeps ids of deleted polylines from being reused.
+        Raises ``ValueError`` if the id is taken, unless ``replace`` (e.g. a map merged
+        from another vehicle's). ``next_id`` (default: one past the largest id seen) keeps
+        ids of deleted polylines from being reused.
 
         Examples
         --------
@@ -300,10 +302,24 @@ class PolylineMap:
         >>> world.next_id, world[5].hits
         (6, 9)
         """
-        if entry.id in self._entries:
+        if entry.id in self._entries and not replace:
             raise ValueError(f"PolylineMap.restore: id {entry.id} is already in the map")
         self._entries[entry.id] = entry
         self._next_id = max(self._next_id, entry.id + 1, 0 if next_id is None else next_id)
+
+    def remove(self, map_id: int) -> None:
+        """Delete polyline ``map_id`` (its id is never reused).
+
+        Examples
+        --------
+        >>> world = PolylineMap()
+        >>> world.add([[0.0, 0.0], [1.0, 0.0]])
+        0
+        >>> world.remove(0)
+        >>> len(world), world.next_id
+        (0, 1)
+        """
+        del self._entries[map_id]
 
     def update(
         self, scan: Scan, pose: ArrayLike, *, timings: dict[str, float] | None = None

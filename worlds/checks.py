@@ -220,6 +220,18 @@ def post_discs(world: WorldSpec) -> list[shapely.Polygon]:
     return [shapely.Point(post.xy).buffer(post.radius) for post in world.posts]
 
 
+def build_spline(path: PathSpec) -> SplinePath:
+    """Return a new spline for ``path``: periodic when the path is closed, else natural.
+
+    Examples
+    --------
+    >>> from worlds.load import load_world
+    >>> build_spline(load_world("sim1").path).closed
+    False
+    """
+    return SplinePath(path.knots, bc_type="periodic" if path.closed else "natural")
+
+
 @functools.lru_cache(maxsize=PATH_CACHE_SIZE)
 def spline_of(path: PathSpec) -> SplinePath:
     """Return the spline the robot drives for ``path`` (cached: specs are immutable).
@@ -230,7 +242,7 @@ def spline_of(path: PathSpec) -> SplinePath:
     >>> round(spline_of(load_world("sim1").path).length, 2)
     10.4
     """
-    return SplinePath(path.knots)
+    return build_spline(path)
 
 
 def path_poses(path: PathSpec, step: float = Clearances.path_step) -> np.ndarray:

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike
 
 from robots.path import SplinePath
 from semistatic.frames import transform_points
+from worlds.checks import build_spline
 from worlds.spec import PostSpec, WallSpec, WorldSpec
 
 __all__ = [
@@ -164,7 +165,7 @@ def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
         import matplotlib.pyplot as plt
 
         _, ax = plt.subplots(figsize=(9, 6.5))
-    path = SplinePath(spec.path.knots)
+    path = build_spline(spec.path)
 
     draw_walls(ax, spec.walls)
     draw_posts(ax, spec.posts)
@@ -328,7 +329,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     >>> with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()) as out:
     ...     status = main([tmp])
     >>> status, out.getvalue().count(".png")
-    (0, 4)
+    (0, 5)
     """
     import matplotlib
 

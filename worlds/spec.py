@@ -404,6 +404,9 @@ class PathSpec:
         The segments, in path order (array of tables ``[[path.segments]]``).
     speed
         Nominal forward speed the follower tracks (m/s).
+    closed
+        The path is a loop driven lap after lap: the last knot repeats the first, the
+        splines join C2 there and vehicles are not carried back to the start between laps.
 
     Examples
     --------
@@ -416,12 +419,18 @@ class PathSpec:
     knots: tuple[Point, ...] = field(metadata=COORDINATE)
     segments: tuple[SegmentSpec, ...]
     speed: float = field(default=0.4, metadata=PATH_SPEED)
+    closed: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
         knots = self.knots
         if len(knots) < 2:
             raise SpecError(MEMORY, "knots", f"needs at least 2 knots, got {len(knots)}")
+        if self.closed and (len(knots) < 4 or tuple(knots[0]) != tuple(knots[-1])):
+            raise SpecError(
+                MEMORY, "knots", "a closed path needs at least 4 knots and must end with its "
+                f"first knot {list(knots[0])} repeated (got {list(knots[-1])})"
+            )
         steps = np.linalg.norm(np.diff(np.asarray(knots), axis=0), axis=1)
         if np.any(steps < MIN_KNOT_SPACING):
             index = int(np.argmin(steps)) + 1

@@ -25,6 +25,7 @@ from scenarios.figures.ekf import plot_ekf_corrections
 from scenarios.figures.laps import plot_detection_scores, plot_lap_times
 from scenarios.figures.polygonal_map import plot_polygonal_map
 from scenarios.figures.replay_map import plot_replay_map
+from scenarios.figures.sharing import plot_sharing_traffic
 from scenarios.figures.tangents import plot_tangent_histograms
 
 __all__ = [
@@ -33,5 +34,6 @@ __all__ = [
     "plot_lap_times",
     "plot_polygonal_map",
     "plot_replay_map",
+    "plot_sharing_traffic",
     "plot_tangent_histograms",
 ]

@@ -18,7 +18,6 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from numpy.typing import ArrayLike
 
-from robots.path import SplinePath
 from scenarios.figures._common import (
     _counted,
     _heading,
@@ -27,6 +26,7 @@ from scenarios.figures._common import (
     _poses,
     _write_png,
 )
+from worlds.checks import build_spline
 from worlds.plot import draw_box, draw_posts, draw_walls, figure_size
 from worlds.spec import WorldSpec
 
@@ -77,7 +77,7 @@ def _check_map_polylines(map_polylines: Sequence[Mapping[str, Any]]) -> list[dic
 
 def _draw_path(ax: Axes, world: WorldSpec) -> None:
     """Draw the planned path thinly, with segment boundaries and names."""
-    spline = SplinePath(world.path.knots)
+    spline = build_spline(world.path)
     samples = max(2, math.ceil(spline.length / PATH_SAMPLE_SPACING) + 1)
     ax.plot(
         *spline.point(np.linspace(0.0, spline.length, samples)).T,

@@ -305,3 +305,38 @@ def test_commands_match_a_follower_on_the_array_path_queries():
         assert command == reference.command(pose, DT, speed_scale=scale)
         assert fast.progress == reference.progress
         pose = unicycle_step(pose, *command, DT) + rng.normal(0.0, 0.003, 3)
+
+
+LOOP = SplinePath([(0.0, 0.0), (3.0, 0.0), (4.0, 1.0), (4.0, 3.0), (3.0, 4.0), (0.0, 4.0),
+                   (-1.0, 3.0), (-1.0, 1.0), (0.0, 0.0)], bc_type="periodic")
+
+
+def test_closed_path_is_driven_lap_after_lap_without_braking_at_the_seam():
+    follower = ChainedFormFollower(LOOP, FollowerParams())
+    pose = LOOP.pose(0.0)
+    dense = LOOP.point(np.linspace(0.0, LOOP.length, 20001))
+    laps, speeds, errors = 0, [], []
+    for _ in range(int(3.5 * LOOP.length / (FollowerParams().speed * DT))):
+        v, omega = follower.command(pose, DT)
+        speeds.append(v)
+        errors.append(np.min(np.linalg.norm(dense - pose[:2], axis=1)))
+        pose = unicycle_step(pose, v, omega, DT)
+        if follower.done:
+            laps += 1
+            follower.reset(keep_speed=True)
+    assert laps == 3
+    cruising = np.array(speeds[int(2.0 / DT):])
+    # No stop at a lap end: after the first acceleration the speed never drops below 90 %.
+    assert cruising.min() > 0.9 * FollowerParams().speed
+    assert max(errors[int(2.0 / DT):]) < 0.02
+
+
+def test_reset_without_keep_speed_starts_from_standstill():
+    follower = ChainedFormFollower(LOOP, FollowerParams())
+    pose = LOOP.pose(0.0)
+    for _ in range(100):
+        v, omega = follower.command(pose, DT)
+        pose = unicycle_step(pose, v, omega, DT)
+    follower.reset()
+    v, _ = follower.command(LOOP.pose(0.0), DT)
+    assert v <= FollowerParams().max_acceleration * DT + 1e-12

@@ -337,3 +337,33 @@ def test_scalar_queries_of_non_finite_s_take_the_array_path():
     assert path.pose(np.nan).shape == (3,)  # nan does not crash the float path's search
     with pytest.raises(ValueError, match="finite"):
         path.project([np.nan, 0.0], s_hint=1.0)
+
+
+ROUNDED_SQUARE = [(0.0, 0.0), (3.0, 0.0), (4.0, 1.0), (4.0, 3.0), (3.0, 4.0), (0.0, 4.0),
+                  (-1.0, 3.0), (-1.0, 1.0), (0.0, 0.0)]
+
+
+def test_closed_path_joins_itself_c2_and_is_driven_by_arc_length():
+    path = SplinePath(ROUNDED_SQUARE, bc_type="periodic")
+    assert path.closed
+    np.testing.assert_allclose(path.pose(0.0), path.pose(path.length), atol=1e-12)
+    # Across the seam: the one-sided derivatives from each end agree (C1 and C2).
+    h = 1e-3
+    ahead = (path.point(h) - path.point(0.0)) / h
+    behind = (path.point(path.length) - path.point(path.length - h)) / h
+    np.testing.assert_allclose(ahead, behind, atol=2e-3)
+    assert abs(path.curvature(0.0) - path.curvature(path.length)) < 1e-9
+    s = np.linspace(0.0, path.length, 2001)
+    speed = np.linalg.norm(np.gradient(path.point(s), s, axis=0), axis=1)
+    assert np.max(np.abs(speed[1:-1] - 1.0)) < 1e-3
+    # Its length is a dense polyline's (an independent estimate).
+    dense = path.point(np.linspace(0.0, path.length, 20001))
+    assert abs(np.sum(np.linalg.norm(np.diff(dense, axis=0), axis=1)) - path.length) < 1e-6
+
+
+def test_open_paths_are_not_closed_and_a_closed_one_must_return_to_its_start():
+    assert not SplinePath(ROUNDED_SQUARE).closed
+    with pytest.raises(ValueError, match="last equal to the first"):
+        SplinePath(ROUNDED_SQUARE[:-1], bc_type="periodic")
+    with pytest.raises(ValueError, match="at least 4 knots"):
+        SplinePath([(0.0, 0.0), (1.0, 0.0), (0.0, 0.0)], bc_type="periodic")

@@ -12,7 +12,7 @@ import pytest
 import shapely
 
 from scenarios.layout import lap_worlds
-from scenarios.load import bundled_scenarios, load_scenario
+from scenarios.load import load_scenario, paper_scenarios
 from scenarios.outputs import summarize
 from scenarios.runner import run_scenario
 
@@ -20,7 +20,7 @@ GOLDEN = tomllib.loads((Path(__file__).parent / "golden_accuracy.toml").read_tex
 PAPER_BOUND_CM = 10.0
 
 
-@pytest.fixture(scope="module", params=bundled_scenarios())
+@pytest.fixture(scope="module", params=paper_scenarios())
 def runs(request):
     spec = load_scenario(request.param)
     log = run_scenario(spec)

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from scenarios.cli import main
 from scenarios.load import DATA_DIR as SCENARIO_DIR
-from scenarios.load import bundled_scenarios
+from scenarios.load import paper_scenarios
 from worlds.load import DATA_DIR as WORLD_DIR
 
 VALIDATE_EXAMPLES = 300
@@ -89,7 +89,7 @@ def _container(document: Any, path: tuple) -> Any:
 @st.composite
 def mutants(draw) -> tuple[str, dict, dict]:
     """Draw a bundled scenario and its world with one to three mutations in either."""
-    name = draw(st.sampled_from(bundled_scenarios()))
+    name = draw(st.sampled_from(paper_scenarios()))
     scenario = tomllib.loads((SCENARIO_DIR / f"{name}.toml").read_text())
     world = tomllib.loads((WORLD_DIR / f"{scenario['world']}.toml").read_text())
     scenario["world"] = "world.toml"

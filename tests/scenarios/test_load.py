@@ -20,6 +20,7 @@ from scenarios.load import (
     OVERRIDE_FILE,
     bundled_scenarios,
     load_scenario,
+    paper_scenarios,
     parse_override,
     scenario_from_toml,
 )
@@ -40,7 +41,7 @@ MOVE_DISTANCE = (0.3, 0.8)  # m a box is moved along its wall between laps
 PARALLEL_TOLERANCE = math.radians(1.0)  # "along its wall": the move's direction vs the wall's
 
 
-@pytest.fixture(params=bundled_scenarios())
+@pytest.fixture(params=paper_scenarios())
 def name(request: pytest.FixtureRequest) -> str:
     return request.param
 
@@ -61,7 +62,8 @@ def error_of(name_or_path, overrides=()) -> SpecError:
 
 
 def test_bundled_scenarios_are_the_table_1_rows():
-    assert bundled_scenarios() == tuple(sorted(PAPER_SCENARIOS))
+    assert paper_scenarios() == tuple(sorted(PAPER_SCENARIOS))
+    assert bundled_scenarios() == (*paper_scenarios(), "warehouse")
 
 
 def test_bundled_scenario_loads_as_the_paper_ran_it(name):

@@ -259,3 +259,25 @@ def test_a_script_drawing_random_numbers_leaves_the_robots_noise_alone(tiny_spec
         bench.add_observer(pusher)
         assert_same_run(bench.run(), tiny_log)
     assert pusher.draws > 10_000
+
+
+@pytest.mark.slow
+def test_a_closed_route_is_driven_lap_after_lap_without_a_return_to_the_start():
+    spec = load_scenario("warehouse", overrides=["laps=2"])
+    log = run_scenario(spec)
+    first, second = log.laps
+    assert first.completed
+    assert second.completed
+    assert second.start_time == pytest.approx(first.start_time + first.duration_s)
+    true = np.asarray(log.true_poses)
+    estimated = np.asarray(log.estimated_poses)
+    # Control ticks are 20 ms apart at <= 1 m/s: no pose (true or EKF) jumps anywhere,
+    # the lap change included, and the EKF tracks across it.
+    assert np.max(np.linalg.norm(np.diff(true[:, :2], axis=0), axis=1)) < 0.03
+    assert np.max(np.linalg.norm(np.diff(estimated[:, :2], axis=0), axis=1)) < 0.03
+    assert np.max(np.linalg.norm(true[:, :2] - estimated[:, :2], axis=1)) < 0.02
+    # Each lap is one loop: it ends where it began (within the follower's goal tolerance).
+    boundary = second.first_tick
+    assert np.linalg.norm(true[boundary, :2] - true[0, :2]) < 0.2
+    assert [lap.stops for lap in log.laps] == [1, 1]  # the worker, on every lap
+    assert sum(lap.collisions for lap in log.laps) == 0

@@ -56,13 +56,16 @@ def world_and_path(name: str) -> tuple[WorldSpec, SplinePath]:
     return world, spline_of(world.path)
 
 
-@pytest.fixture(params=bundled_worlds())
+PAPER_WORLDS = ("pal1", "pal3", "sim1", "sim2")  # the warehouse has its own tests
+
+
+@pytest.fixture(params=PAPER_WORLDS)
 def name(request: pytest.FixtureRequest) -> str:
     return request.param
 
 
-def test_bundled_worlds_are_the_papers_environments():
-    assert bundled_worlds() == ("pal1", "pal3", "sim1", "sim2")
+def test_bundled_worlds_are_the_papers_environments_and_the_warehouse():
+    assert bundled_worlds() == (*PAPER_WORLDS, "warehouse")
 
 
 def test_world_loads_with_its_name_and_source(name):

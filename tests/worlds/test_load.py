@@ -166,7 +166,7 @@ def test_unknown_key_far_from_any_name_lists_the_allowed_keys(tmp_path):
     error = load_error(write(tmp_path, edited("speed = 0.5", "speed = 0.5\nzzz = 1")))
     assert error.key == "path.zzz"
     assert "did you mean" not in error.message
-    assert "allowed keys: knots, segments, speed" in error.message
+    assert "allowed keys: closed, knots, segments, speed" in error.message
 
 
 @pytest.mark.parametrize(
