@@ -34,7 +34,7 @@ import contextlib
 import copy
 import itertools
 import math
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,7 +43,7 @@ from scenarios.load import OVERRIDE_FILE, parse_override, scenario_from_toml, sc
 from scenarios.output_dir import check_output_dir
 from scenarios.progress import count_progress
 from scenarios.spec import ScenarioSpec
-from scenarios.workers import worker_pool
+from scenarios.tune_run import PointResult, RecordingSet, run_sweep
 from worlds.errors import SpecError
 from worlds.validation import did_you_mean, read_toml
 
@@ -447,97 +447,6 @@ def sweep_points(
 
 
 # --------------------------------------------------------------------------------------
-# Running
-
-
-@dataclass(frozen=True)
-class PointResult:
-    """The outcome of one point: its metrics (``metrics.json`` content) or why it failed.
-
-    Examples
-    --------
-    >>> point = sweep_points("sim1", {"mapper.gate": [0.1]})[0]
-    >>> PointResult(point, error="RuntimeError: lost").failed
-    True
-    """
-
-    point: SweepPoint
-    metrics: dict[str, Any] | None = None
-    error: str | None = None
-
-    @property
-    def failed(self) -> bool:
-        """Return whether the run raised instead of finishing."""
-        return self.error is not None
-
-
-def _run_point(spec: ScenarioSpec) -> tuple[dict[str, Any] | None, str | None]:
-    """Run one point (in a worker process); a run that raises is reported, not fatal.
-
-    One extreme threshold that makes a run fail (e.g. the robot never re-localises)
-    should cost its own row, not the hours of the rest of the sweep.
-    """
-    from scenarios.outputs import summarize
-    from scenarios.runner import run_scenario
-
-    try:
-        return summarize(run_scenario(spec)), None
-    except Exception as error:  # recorded in the point's row, see the docstring
-        return None, f"{type(error).__name__}: {error}"
-
-
-def run_sweep(
-    points: Sequence[SweepPoint],
-    *,
-    jobs: int = 1,
-    on_result: Callable[[PointResult], None] | None = None,
-) -> list[PointResult]:
-    """Run every point, ``jobs`` at a time in worker processes; return results in point order.
-
-    Each point is an independent run seeded by its own spec, so the metrics (apart from
-    the timing figures) do not depend on ``jobs``. ``on_result`` is called as each point
-    finishes (in completion order), e.g. to advance a progress bar.
-
-    Examples
-    --------
-    >>> run_sweep([], jobs=2)
-    []
-    >>> run_sweep([], jobs=0)
-    Traceback (most recent call last):
-    ...
-    ValueError: run_sweep: jobs must be >= 1 (got 0)
-    """
-    if jobs < 1:
-        raise ValueError(f"run_sweep: jobs must be >= 1 (got {jobs})")
-    results: dict[int, PointResult] = {}
-
-    def record(point: SweepPoint, outcome: tuple[dict[str, Any] | None, str | None]) -> None:
-        result = PointResult(point, *outcome)
-        results[point.index] = result
-        if on_result is not None:
-            on_result(result)
-
-    if jobs == 1 or len(points) <= 1:
-        for point in points:
-            record(point, _run_point(point.spec))
-    else:
-        by_index = {point.index: point for point in points}
-        with worker_pool(min(jobs, len(points))) as pool:
-            tasks = [(point.index, point.spec) for point in points]
-            for index, outcome in pool.imap_unordered(_run_indexed_point, tasks):
-                record(by_index[index], outcome)
-    return [results[point.index] for point in points]
-
-
-def _run_indexed_point(
-    task: tuple[int, ScenarioSpec],
-) -> tuple[int, tuple[dict[str, Any] | None, str | None]]:
-    """Run one point in a worker; return its index with the outcome."""
-    index, spec = task
-    return index, _run_point(spec)
-
-
-# --------------------------------------------------------------------------------------
 # Rows, ranking and outputs
 
 
@@ -834,6 +743,13 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help=f"rank by this column (default {DEFAULT_SORT}); one of {', '.join(METRICS)}",
     )
     tune.add_argument("--no-figures", action="store_true", help="skip figures/sweep.png")
+    tune.add_argument(
+        "--recording", dest="recordings", action="append", default=[], type=Path,
+        metavar="DIR",
+        help="replay the mapper on this recording (`semistatic run SCENARIO --record DIR`) "
+             "instead of re-simulating; one per seed; only mapper thresholds under the "
+             "conservative policy (they cannot change the motion)",
+    )
     return tune
 
 
@@ -861,16 +777,27 @@ def main_tune(args: argparse.Namespace) -> int:
         )
     grids = parse_grids(args.grids)
     seeds = parse_seeds(args.seeds) if args.seeds is not None else None
+    recordings = RecordingSet.read(args.recordings) if args.recordings else None
+    laps = args.laps
+    if recordings is not None:
+        manifests = [recording.manifest for recording in recordings.recordings()]
+        # A replay runs the recorded laps and seeds: default to them.
+        laps = manifests[0]["laps"] if laps is None else laps
+        if seeds is None:
+            seeds = tuple(sorted(manifest["seed"] for manifest in manifests))
     if not grids and seeds is None:
         raise SpecError(
             GRID_OPTION, "KEY=V1,V2,...", "nothing to sweep: give at least one --grid or --seeds"
         )
-    points = sweep_points(args.scenario, grids, seeds=seeds, laps=args.laps,
+    points = sweep_points(args.scenario, grids, seeds=seeds, laps=laps,
                           overrides=args.overrides)
+    if recordings is not None:
+        for point in points:  # refuse what a replay cannot honour before any work
+            recordings.for_spec(point.spec)
     out = args.out if args.out is not None else Path("results") / f"tune-{points[0].spec.name}"
     check_output_dir(out)
     with count_progress(len(points), f"tune {points[0].spec.name}", "run") as advance:
-        results = run_sweep(points, jobs=args.jobs,
+        results = run_sweep(points, jobs=args.jobs, recordings=recordings,
                             on_result=lambda result: advance(result.point.label))
     summary = write_sweep(results, out, sort=args.sort, figures=not args.no_figures)
     print(format_ranking(summary, out))
