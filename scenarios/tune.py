@@ -34,7 +34,7 @@ import contextlib
 import copy
 import itertools
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,15 +56,19 @@ __all__ = [
     "SweepPoint",
     "add_parser",
     "combine_seeds",
+    "display_value",
     "format_ranking",
     "main_tune",
+    "metric_value",
     "parse_grid",
     "parse_grids",
     "parse_seeds",
     "rank",
     "run_sweep",
+    "settings_text",
     "sweep_points",
     "sweep_row",
+    "toml_value",
     "write_sweep",
 ]
 
@@ -215,7 +219,7 @@ def parse_grid(text: str) -> tuple[str, tuple[Any, ...]]:
     for position, value in enumerate(values):
         if value in values[:position]:
             raise SpecError(
-                GRID_OPTION, key, f"value {_display(value)} appears twice; list each once"
+                GRID_OPTION, key, f"value {display_value(value)} appears twice; list each once"
             )
     return key, values
 
@@ -269,8 +273,14 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return tuple(seeds)
 
 
-def _toml_value(value: Any) -> str:
-    """Write ``value`` back as TOML text for an override (the inverse of parse_override)."""
+def toml_value(value: Any) -> str:
+    """Write ``value`` back as TOML text for an override (the inverse of parse_override).
+
+    Examples
+    --------
+    >>> toml_value(0.1), toml_value("adaptive"), toml_value(True)
+    ('0.1', '"adaptive"', 'true')
+    """
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
@@ -278,15 +288,21 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+        return "[" + ", ".join(toml_value(item) for item in value) + "]"
     if isinstance(value, dict):
-        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
+        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
     return str(value)
 
 
-def _display(value: Any) -> str:
-    """Return ``value`` as a person writes it on the command line."""
-    return value if isinstance(value, str) else _toml_value(value)
+def display_value(value: Any) -> str:
+    """Return ``value`` as a person writes it on the command line.
+
+    Examples
+    --------
+    >>> display_value("adaptive"), display_value(0.25)
+    ('adaptive', '0.25')
+    """
+    return value if isinstance(value, str) else toml_value(value)
 
 
 @dataclass(frozen=True)
@@ -318,7 +334,7 @@ class SweepPoint:
         >>> sweep_points("sim1", {"policy": ["adaptive"]}, seeds=[1, 2])[1].label
         'policy=adaptive seed=2'
         """
-        values = [f"{key}={_display(value)}" for key, value in self.settings]
+        values = [f"{key}={display_value(value)}" for key, value in self.settings]
         return " ".join([*values, f"seed={self.seed}"])
 
 
@@ -431,7 +447,7 @@ def sweep_points(
     for combination in itertools.product(*grids.values()):
         settings = tuple(zip(grids, combination, strict=True))
         for seed in seed_axis:
-            point_overrides = base + [f"{key}={_toml_value(value)}" for key, value in settings]
+            point_overrides = base + [f"{key}={toml_value(value)}" for key, value in settings]
             if seed is not None:
                 point_overrides.append(f"seed={seed}")
             with _blame_options(grids):
@@ -457,6 +473,17 @@ def _lookup(metrics: Mapping[str, Any] | None, path: Sequence[str]) -> Any:
             return None
         value = value.get(key)
     return value
+
+
+def metric_value(metrics: Mapping[str, Any] | None, name: str) -> Any:
+    """Return metric column ``name`` (a key of :data:`METRICS`) of a run's metrics, or None.
+
+    Examples
+    --------
+    >>> metric_value({"detection": {"f1": 0.5}}, "f1"), metric_value(None, "f1")
+    (0.5, None)
+    """
+    return _lookup(metrics, METRICS[name].path)
 
 
 def sweep_row(result: PointResult) -> dict[str, Any]:
@@ -498,7 +525,7 @@ def combine_seeds(results: Sequence[PointResult]) -> list[dict[str, Any]]:
     """
     groups: dict[tuple, list[PointResult]] = {}
     for result in results:
-        key = tuple((name, _toml_value(value)) for name, value in result.point.settings)
+        key = tuple((name, toml_value(value)) for name, value in result.point.settings)
         groups.setdefault(key, []).append(result)
     rows = []
     for members in groups.values():
@@ -583,8 +610,12 @@ def write_sweep(
     *,
     sort: str = DEFAULT_SORT,
     figures: bool = True,
+    extra: Callable[[dict[str, Any], Path], None] | None = None,
 ) -> dict[str, Any]:
     """Write ``sweep.csv``, ``sweep.json`` and ``figures/sweep.png`` into ``out`` atomically.
+
+    ``extra(summary, staging)``, when given, adds to the summary and writes more files
+    into the staging directory before it is published (a search's study report).
 
     Returns the content of ``sweep.json``: the scenario, the grid, the seeds, every
     point (its row and full metrics), the grid combinations ranked by ``sort`` (means
@@ -615,24 +646,33 @@ def write_sweep(
                         for point in summary["points"]]
 
     def fill(staging: Path) -> None:
-        (staging / "sweep.csv").write_text(csv_text(rows))
-        (staging / "sweep.json").write_text(json_text(summary))
         if figures:
             (staging / "figures").mkdir()
             from scenarios.tune_plot import plot_sweep  # matplotlib only when drawing
 
             plot_sweep(summary, staging / "figures" / "sweep.png")
+        if extra is not None:
+            extra(summary, staging)
+        (staging / "sweep.csv").write_text(csv_text(rows))
+        (staging / "sweep.json").write_text(json_text(summary))
 
     stage_and_publish(Path(out), fill)
     return summary
 
 
-def _settings_text(settings: Mapping[str, Any]) -> str:
-    return " ".join(f"{key}={_display(value)}" for key, value in settings.items())
+def settings_text(settings: Mapping[str, Any]) -> str:
+    """Return ``key=value ...`` of a point's settings, as on the command line.
+
+    Examples
+    --------
+    >>> settings_text({"mapper.gate": 0.1, "policy": "adaptive"})
+    'mapper.gate=0.1 policy=adaptive'
+    """
+    return " ".join(f"{key}={display_value(value)}" for key, value in settings.items())
 
 
 def _display_cell(value: Any) -> Any:
-    return _toml_value(value) if isinstance(value, list | tuple | dict | bool) else value
+    return toml_value(value) if isinstance(value, list | tuple | dict | bool) else value
 
 
 TABLE_COLUMNS = {
@@ -675,7 +715,7 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
     ranking = summary["ranking"]
     keys = list(summary["grid"])
     header = ["rank", *keys, "seeds", *TABLE_COLUMNS.values()]
-    lines = [[str(rank_number), *(_display(row["settings"][key]) for key in keys),
+    lines = [[str(rank_number), *(display_value(row["settings"][key]) for key in keys),
               str(len(row["seeds"])) + (f" ({row['failed']} failed)" if row["failed"] else ""),
               *(_cell(row[name]) for name in TABLE_COLUMNS)]
              for rank_number, row in enumerate(ranking[:limit], start=1)]
@@ -696,7 +736,7 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
     if best is None:
         text.append(f"best: none, no run has a value for {METRICS[sort].label}")
     else:
-        settings = _settings_text(best["settings"])
+        settings = settings_text(best["settings"])
         seeds = len(best["seeds"])
         text.append(
             f"best by {METRICS[sort].label}: {settings or 'the scenario as is'} "
@@ -750,6 +790,37 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
              "instead of re-simulating; one per seed; only mapper thresholds under the "
              "conservative policy (they cannot change the motion)",
     )
+    search = tune.add_argument_group(
+        "search with Optuna (instead of --grid)",
+        "the study lives in an Optuna storage (DIR/study.db by default): re-running the same "
+        "command after an interruption continues it",
+    )
+    search.add_argument(
+        "--param", dest="params", action="append", default=[],
+        metavar="KEY=LOW:HIGH[:log] | KEY=V1,V2,...",
+        help="a parameter to search: a range (integers when both ends are), on a log scale, "
+             "or choices, e.g. --param mapper.gate=0.05:0.20 --param mapper.outlier_k=2,3,4",
+    )
+    search.add_argument("--trials", type=int, help="finished trials wanted (default 20; grid: "
+                                                   "its size)")
+    search.add_argument("--sampler", default="tpe", help="tpe (default), random or grid")
+    search.add_argument("--grid-points", type=int, default=5,
+                        help="values of each range for --sampler grid (default 5)")
+    search.add_argument(
+        "--objective", dest="objectives", action="append", default=[], metavar="METRIC",
+        help="metric to optimise (mean over seeds; default the --sort metric); several make "
+             "a multi-objective search with a Pareto front, e.g. --objective "
+             "table1_mean_avg_cm --objective f1 --objective total_lap_time_s",
+    )
+    search.add_argument("--storage", metavar="URL",
+                        help="Optuna storage URL (default sqlite:///DIR/study.db), e.g. a "
+                             "shared postgresql:// database for a cluster")
+    search.add_argument("--study", metavar="NAME", help="study name (default tune-SCENARIO)")
+    search.add_argument("--backend", default="pool", choices=("pool", "ray"),
+                        help="where trials run: worker processes (default) or Ray tasks")
+    search.add_argument("--address", metavar="ADDR",
+                        help="Ray cluster address (with --backend ray; default: a local "
+                             "Ray instance with --jobs CPUs)")
     return tune
 
 
@@ -770,6 +841,10 @@ def main_tune(args: argparse.Namespace) -> int:
     """
     if args.jobs < 1:
         raise SpecError("--jobs", "jobs", f"must be >= 1, got {args.jobs}")
+    if getattr(args, "params", None):
+        from scenarios.tune_study import main_search  # Optuna only when searching
+
+        return main_search(args)
     if args.sort not in METRICS:
         raise SpecError(
             "--sort", args.sort,
@@ -779,12 +854,8 @@ def main_tune(args: argparse.Namespace) -> int:
     seeds = parse_seeds(args.seeds) if args.seeds is not None else None
     recordings = RecordingSet.read(args.recordings) if args.recordings else None
     laps = args.laps
-    if recordings is not None:
-        manifests = [recording.manifest for recording in recordings.recordings()]
-        # A replay runs the recorded laps and seeds: default to them.
-        laps = manifests[0]["laps"] if laps is None else laps
-        if seeds is None:
-            seeds = tuple(sorted(manifest["seed"] for manifest in manifests))
+    if recordings is not None:  # a replay runs the recorded laps and seeds by default
+        laps, seeds = recordings.defaults(laps, seeds)
     if not grids and seeds is None:
         raise SpecError(
             GRID_OPTION, "KEY=V1,V2,...", "nothing to sweep: give at least one --grid or --seeds"

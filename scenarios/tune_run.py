@@ -14,7 +14,9 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import queue
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +27,20 @@ from scenarios.spec import ScenarioSpec
 from scenarios.workers import worker_pool
 from worlds.errors import SpecError
 
-__all__ = ["PointResult", "RecordingSet", "run_point", "run_sweep"]
+__all__ = [
+    "BACKENDS",
+    "PointResult",
+    "PoolBackend",
+    "RayBackend",
+    "RecordingSet",
+    "open_backend",
+    "run_point",
+    "run_points",
+    "run_sweep",
+]
+
+BACKENDS = ("pool", "ray")
+"""Where trials run: worker processes of this machine, or Ray tasks (a local or remote cluster)."""
 
 Outcome = tuple[dict[str, Any] | None, str | None]
 
@@ -84,6 +99,16 @@ class RecordingSet:
                 )
             seen[key] = str(path)
         return cls(tuple(str(path) for path in paths))
+
+    def defaults(self, laps: int | None, seeds: tuple[int, ...] | None,
+                 ) -> tuple[int | None, tuple[int, ...] | None]:
+        """Return ``laps`` and ``seeds``, defaulting to the recorded laps and seeds."""
+        manifests = [recording.manifest for recording in self.recordings()]
+        if laps is None:
+            laps = manifests[0]["laps"]
+        if seeds is None:
+            seeds = tuple(sorted(manifest["seed"] for manifest in manifests))
+        return laps, seeds
 
     def recordings(self) -> list[Recording]:
         """Return the recordings (read once per process)."""
@@ -178,3 +203,133 @@ def _run_indexed_point(
     """Run one point in a worker; return its index with the outcome."""
     index, spec, recordings = task
     return index, run_point(spec, recordings)
+
+
+def run_points(specs: Sequence[ScenarioSpec], recordings: RecordingSet | None = None,
+               ) -> list[Outcome]:
+    """Run the points of one search trial (its seeds) one after the other; return outcomes.
+
+    Examples
+    --------
+    >>> run_points([])
+    []
+    """
+    return [run_point(spec, recordings) for spec in specs]
+
+
+class PoolBackend:
+    """Run tasks in ``jobs`` worker processes of this machine (they die with it).
+
+    ``submit(key, specs, recordings)`` starts :func:`run_points`; ``finished(timeout)``
+    returns the ``(key, outcomes)`` pairs done so far, waiting up to ``timeout`` s for one.
+
+    Examples
+    --------
+    >>> with PoolBackend(1) as backend:
+    ...     backend.submit("a", [], None)
+    ...     backend.finished(timeout=10.0)
+    [('a', [])]
+    """
+
+    def __init__(self, jobs: int) -> None:
+        self.capacity = jobs
+        self._context = worker_pool(jobs)
+        self._done: queue.Queue = queue.Queue()
+
+    def __enter__(self) -> PoolBackend:
+        self._pool = self._context.__enter__()
+        return self
+
+    def __exit__(self, *exc_info) -> bool | None:
+        return self._context.__exit__(*exc_info)
+
+    def submit(self, key: Any, specs: Sequence[ScenarioSpec],
+               recordings: RecordingSet | None) -> None:
+        """Start the points ``specs`` of task ``key``."""
+        self._pool.apply_async(
+            run_points, (list(specs), recordings),
+            callback=lambda outcomes: self._done.put((key, outcomes)),
+            error_callback=lambda error: self._done.put(
+                (key, [(None, f"{type(error).__name__}: {error}")] * len(specs))
+            ),
+        )
+
+    def finished(self, timeout: float) -> list[tuple[Any, list[Outcome]]]:
+        """Return the tasks finished since the last call (waiting up to ``timeout`` s)."""
+        done = []
+        with contextlib.suppress(queue.Empty):
+            done.append(self._done.get(timeout=timeout))
+            while True:
+                done.append(self._done.get_nowait())
+        return done
+
+
+class RayBackend:
+    """Run tasks as Ray tasks: a local Ray instance, or the cluster at ``address``.
+
+    Every task asks for one CPU, so ``capacity`` is the cluster's CPU count (or ``jobs``
+    on a local instance started here). Workers import this project, so on a cluster
+    every node needs it installed (README, "Tuning on a cluster").
+    """
+
+    def __init__(self, jobs: int, address: str | None = None) -> None:
+        self.jobs = jobs
+        self.address = address
+        self._pending: dict[Any, Any] = {}
+
+    def __enter__(self) -> RayBackend:
+        import ray
+
+        self._ray = ray
+        self._started = not ray.is_initialized()
+        if self._started:
+            if self.address is None:
+                ray.init(num_cpus=self.jobs, include_dashboard=False, log_to_driver=False,
+                         configure_logging=False)
+            else:
+                ray.init(address=self.address, log_to_driver=False)
+        cpus = int(ray.cluster_resources().get("CPU", self.jobs))
+        self.capacity = cpus if self.address is not None else self.jobs
+        self._remote = ray.remote(num_cpus=1, max_retries=0)(run_points)
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        for reference, _ in self._pending.values():
+            self._ray.cancel(reference, force=True)
+        if self._started:
+            self._ray.shutdown()
+
+    def submit(self, key: Any, specs: Sequence[ScenarioSpec],
+               recordings: RecordingSet | None) -> None:
+        """Start the points ``specs`` of task ``key`` as one Ray task."""
+        self._pending[key] = (self._remote.remote(list(specs), recordings), len(specs))
+
+    def finished(self, timeout: float) -> list[tuple[Any, list[Outcome]]]:
+        """Return the tasks finished since the last call (waiting up to ``timeout`` s)."""
+        if not self._pending:
+            return []
+        references = [reference for reference, _ in self._pending.values()]
+        self._ray.wait(references, num_returns=1, timeout=timeout)
+        ready, _ = self._ray.wait(references, num_returns=len(references), timeout=0)
+        done = []
+        for key, (reference, count) in list(self._pending.items()):
+            if reference in ready:
+                del self._pending[key]
+                try:
+                    done.append((key, self._ray.get(reference)))
+                except self._ray.exceptions.RayError as error:
+                    done.append((key, [(None, f"{type(error).__name__}: {error}")] * count))
+        return done
+
+
+def open_backend(name: str, jobs: int, address: str | None = None) -> PoolBackend | RayBackend:
+    """Return the backend ``name`` (``pool`` or ``ray``), to use in a ``with`` block.
+
+    Examples
+    --------
+    >>> open_backend("pool", 2).capacity
+    2
+    """
+    if name == "ray":
+        return RayBackend(jobs, address)
+    return PoolBackend(jobs)
