@@ -149,7 +149,7 @@ def parse_param(text: str) -> SearchParam:
         low, high = _number(parts[0], key), _number(parts[1], key)
         integer = isinstance(low, int) and isinstance(high, int)
         return SearchParam(key, low, high, log=scale == "log", integer=integer)
-    from scenarios.tune import parse_grid  # the grid's value syntax, TOML-typed
+    from scenarios.tune_points import parse_grid  # the grid's value syntax, TOML-typed
 
     try:
         return SearchParam(key, choices=parse_grid(f"{key}={raw}")[1])

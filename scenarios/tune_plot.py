@@ -12,7 +12,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from scenarios.tune import METRICS, NEES_TARGET, display_value, settings_text, toml_value
+from scenarios.tune_metrics import METRICS, NEES_TARGET
+from scenarios.tune_points import display_value, toml_value
+from scenarios.tune_table import settings_text
 
 __all__ = ["plot_sweep"]
 

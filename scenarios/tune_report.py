@@ -27,7 +27,8 @@ from typing import Any
 
 import optuna
 
-from scenarios.tune import METRICS, display_value, toml_value
+from scenarios.tune_metrics import METRICS
+from scenarios.tune_points import display_value, toml_value
 from scenarios.tune_search import SearchConfig, finished_trials
 
 __all__ = ["format_study", "plot_study", "set_line", "study_report", "toml_snippet"]

@@ -15,6 +15,7 @@ the study: no finished trial runs again, none is lost or doubled.
 
 Examples
 --------
+>>> from scenarios.tune_params import parse_params
 >>> config = SearchConfig("pal1", parse_params(["mapper.gate=0.05:0.2"]), trials=4)
 >>> config.directions()
 ['minimize']
@@ -34,8 +35,9 @@ from typing import Any
 
 import optuna
 
-from scenarios.tune import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value, sweep_points
+from scenarios.tune_metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value
 from scenarios.tune_params import PARAM_OPTION, SearchParam, grid_size
+from scenarios.tune_points import sweep_points
 from scenarios.tune_run import PointResult, RecordingSet
 from worlds.errors import SpecError
 from worlds.validation import did_you_mean
@@ -81,7 +83,7 @@ class SearchConfig:
     >>> SearchConfig("pal1", (), objectives=("f2",))
     Traceback (most recent call last):
     ...
-    worlds.errors.SpecError: --objective: f2: unknown metric (did you mean 'f1'?)
+    worlds.errors.SpecError: --objective: f2: unknown metric
     """
 
     scenario: str

@@ -22,8 +22,8 @@ from pathlib import Path
 from scenarios.output_dir import RESULT_MARKER, check_output_dir
 from scenarios.outputs import json_text
 from scenarios.progress import count_progress
-from scenarios.tune import GRID_OPTION, parse_seeds, write_sweep
 from scenarios.tune_params import grid_size, parse_params
+from scenarios.tune_points import GRID_OPTION, parse_seeds
 from scenarios.tune_report import format_study, plot_study, study_report
 from scenarios.tune_run import RecordingSet, open_backend
 from scenarios.tune_search import (
@@ -33,6 +33,7 @@ from scenarios.tune_search import (
     run_study,
     trial_results,
 )
+from scenarios.tune_table import write_sweep
 from worlds.errors import SpecError
 
 __all__ = ["DEFAULT_TRIALS", "STUDY_FILE", "default_storage", "main_search"]

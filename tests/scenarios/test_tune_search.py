@@ -12,7 +12,7 @@ import optuna
 import pytest
 
 from scenarios.load import load_scenario
-from scenarios.tune import TIMING_COLUMNS
+from scenarios.tune_metrics import TIMING_COLUMNS
 from scenarios.tune_params import parse_param, parse_params
 from scenarios.tune_run import PoolBackend, RayBackend
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
