@@ -23,16 +23,11 @@ not depend on how many workers run the sweep (same seed, same metrics).
 
 Examples
 --------
->>> from scenarios.tune_points import parse_grids, sweep_points
->>> grid = parse_grids(["mapper.gate=0.08,0.12", "policy=conservative,adaptive"])
->>> grid
-{'mapper.gate': (0.08, 0.12), 'policy': ('conservative', 'adaptive')}
->>> for point in sweep_points("sim1", grid, laps=1):
-...     print(point.label)
-mapper.gate=0.08 policy=conservative seed=0
-mapper.gate=0.08 policy=adaptive seed=0
-mapper.gate=0.12 policy=conservative seed=0
-mapper.gate=0.12 policy=adaptive seed=0
+>>> parser = argparse.ArgumentParser(prog="semistatic")
+>>> _ = add_parser(parser.add_subparsers(dest="command"))
+>>> args = parser.parse_args(["tune", "pal1", "--param", "mapper.gate=0.05:0.2"])
+>>> args.params, args.sampler, args.backend
+(['mapper.gate=0.05:0.2'], 'tpe', 'pool')
 """
 
 from __future__ import annotations
