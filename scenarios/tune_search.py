@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -160,13 +161,28 @@ class SearchConfig:
 
     def sampler_object(self) -> optuna.samplers.BaseSampler:
         """Return the Optuna sampler (seeded, so a search is repeatable)."""
-        if self.sampler == "grid":
-            space = {param.key: list(param.grid_values(self.grid_points))
-                     for param in self.params}
-            return optuna.samplers.GridSampler(space, seed=self.sampler_seed)
-        if self.sampler == "random":
+        if self.sampler in ("grid", "random"):
+            # The grid's points are queued when the study is made (grid_trials): Optuna's
+            # GridSampler stops the study from inside tell(), which only works in optimize().
             return optuna.samplers.RandomSampler(seed=self.sampler_seed)
         return optuna.samplers.TPESampler(seed=self.sampler_seed)
+
+    def grid_trials(self) -> list[dict[str, Any]]:
+        """Return every point of the grid sampler's grid, in product order (else ``[]``).
+
+        Examples
+        --------
+        >>> from scenarios.tune_params import parse_params
+        >>> SearchConfig("pal1", parse_params(["mapper.gate=0.1:0.2", "mapper.outlier_k=2,3"]),
+        ...              sampler="grid", grid_points=2, trials=4).grid_trials()[:2]
+        [{'mapper.gate': 0.1, 'mapper.outlier_k': 2}, {'mapper.gate': 0.1, 'mapper.outlier_k': 3}]
+        """
+        if self.sampler != "grid":
+            return []
+        keys = [param.key for param in self.params]
+        values = [param.grid_values(self.grid_points) for param in self.params]
+        return [dict(zip(keys, combination, strict=True))
+                for combination in itertools.product(*values)]
 
     def objective_values(self, metrics: Sequence[Mapping[str, Any] | None]) -> dict[str, Any]:
         """Return the per-objective mean, worst case and spread over the seeds' metrics.
@@ -228,6 +244,8 @@ def open_study(config: SearchConfig, url: str, name: str,
     study = optuna.create_study(storage=storage, study_name=name, sampler=sampler,
                                 directions=config.directions())
     study.set_user_attr(CONFIG_ATTR, config.fingerprint())
+    for values in config.grid_trials()[:config.trials]:
+        study.enqueue_trial(values)
     return study, storage
 
 

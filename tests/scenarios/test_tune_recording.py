@@ -86,6 +86,8 @@ def test_motion_changes_name_the_field():
         (["--grid", "mapper.gate=0.1", "--seeds", "3"], ["--recording: seed:", "seed 3"]),
         (["--grid", "mapper.gate=0.1", "--laps", "3"], ["--recording: laps", "2 laps"]),
         (["--grid", "mapper.gte=0.1"], ["--grid: mapper.gte:", "did you mean 'gate'"]),
+        (["--param", "noise.range=1:2", "--trials", "2"], ["--recording: noise:", "motion"]),
+        (["--param", "policy=conservative,adaptive"], ["--recording: policy:", "motion"]),
     ],
 )
 def test_tune_refuses_what_a_recording_cannot_replay(recorded, tmp_path, capsys, options,
