@@ -44,7 +44,10 @@ def test_run_gui_under_a_virtual_display(tmp_path):
                "--gui", "--laps", "1", "--set", "lap_timeout=3", "--no-figures",
                "--out", str(out)]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300, check=False)
-    assert done.returncode == 0, done.stderr[-2000:]
+    # The tiny path takes ~9 s: a 3 s lap_timeout keeps the GUI run short, and a lap that
+    # times out ends the run with status 1 (issue 12) after writing its results.
+    assert done.returncode == 1, done.stderr[-2000:]
+    assert "run failed: lap 1: did not reach the end of the path" in done.stderr
     assert json.loads((out / "metrics.json").read_text())["laps"] == 1
 
 
