@@ -89,6 +89,12 @@ def _parser() -> argparse.ArgumentParser:
         help="storage of the --bag (default sqlite3, ROS 2 Humble's; mcap for Foxglove)",
     )
 
+    run.add_argument(
+        "--record", type=Path, metavar="DIR",
+        help="also record what the mapper and the scoring saw (DIR must not exist), for "
+             "`semistatic tune --recording DIR`",
+    )
+
     replay = commands.add_parser("replay", help="replay the mapper on a real laser log")
     replay.add_argument("log", type=Path, help="CARMEN log (.log, .gz) or ROS 1/2 bag")
     replay.add_argument("--out", type=Path, help="output directory (default results/replay-LOG)")
@@ -192,6 +198,7 @@ def _check(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from scenarios.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.outputs import summarize, write_outputs
+    from scenarios.recording import ScanRecorder, check_new_recording_path
     from scenarios.runner import run_scenario
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
@@ -204,9 +211,14 @@ def _run(args: argparse.Namespace) -> int:
         except ValueError as error:
             raise InputError(str(error)) from None
         recorder = BagRecorder()
+    scan_recorder = None
+    if args.record is not None:
+        check_new_recording_path(args.record)
+        scan_recorder = ScanRecorder()
     total = _estimated_sim_time(spec, world)
     with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
-        log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder)
+        log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder,
+                           observers=(scan_recorder,) if scan_recorder else ())
     comparison = None
     if args.compare:
         other = "adaptive" if spec.policy == "conservative" else "conservative"
@@ -216,6 +228,9 @@ def _run(args: argparse.Namespace) -> int:
         comparison = summarize(other_log)
     metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison)
     summary = _run_summary(metrics, out)
+    if scan_recorder is not None:
+        scan_recorder.write(args.record, spec, metrics)
+        summary += f"\nrecording in {args.record}/ ({scan_recorder.scans} scans)"
     if recorder is not None:
         # After the outputs, so that a bag inside --out finds its parent directory.
         write_run_bag(args.bag, recorder.frames, log.robot, storage=args.bag_storage)

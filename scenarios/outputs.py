@@ -17,7 +17,7 @@ import csv
 import io
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,12 +39,14 @@ from scenarios.metrics import (
 )
 from scenarios.output_dir import stage_and_publish
 from scenarios.policies import policy_name
+from scenarios.records import LapLog
 from scenarios.runner import RunLog
 
 __all__ = [
     "PAPER_TABLE1",
     "TABLE1_COLUMNS",
     "csv_text",
+    "detection_metrics",
     "failed_laps",
     "json_text",
     "policy_comparison",
@@ -71,17 +73,37 @@ def _median_ms(seconds: list[float]) -> float | None:
     return round(float(np.median(seconds)) * 1e3, 4) if seconds else None
 
 
-def summarize(log: RunLog) -> dict[str, Any]:
-    """Return the ``metrics.json`` content of a run (DESIGN.md keys, and more)."""
-    spec = log.spec
-    laps = log.laps
+def detection_metrics(laps: Sequence[LapLog]) -> dict[str, Any]:
+    """Return the ``detection`` section of ``metrics.json`` from the scored lap logs.
+
+    Examples
+    --------
+    >>> lap = LapLog(lap=1, start_time=0.0, detection={"tp": 3, "fp": 1, "fn": 0})
+    >>> detection_metrics([lap])["precision"]
+    0.75
+    """
     totals = [lap.detection for lap in laps]
     overall = detection_scores(
         sum(d["tp"] for d in totals), sum(d["fp"] for d in totals), sum(d["fn"] for d in totals)
     )
-    latencies = {
-        f"lap_{lap.lap:02d}/{name}": value for lap in laps for name, value in lap.latencies.items()
+    return {
+        "precision": overall["precision"],
+        "recall": overall["recall"],
+        "f1": overall["f1"],
+        "false_objects_from_people": sum(lap.false_objects_from_people for lap in laps),
+        "per_lap": [{"lap": lap.lap, **lap.detection} for lap in laps],
+        "latency_scans": {
+            f"lap_{lap.lap:02d}/{name}": value
+            for lap in laps
+            for name, value in lap.latencies.items()
+        },
     }
+
+
+def summarize(log: RunLog) -> dict[str, Any]:
+    """Return the ``metrics.json`` content of a run (DESIGN.md keys, and more)."""
+    spec = log.spec
+    laps = log.laps
     localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)
     history = log.ekf_history
     if len(history.get("stamp", ())):
@@ -112,14 +134,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
         "robot": log.robot.name,
         "policy": policy_name(spec.policy),
         "table1_cm": table1_cm(log.table1_distances),
-        "detection": {
-            "precision": overall["precision"],
-            "recall": overall["recall"],
-            "f1": overall["f1"],
-            "false_objects_from_people": sum(lap.false_objects_from_people for lap in laps),
-            "per_lap": [{"lap": lap.lap, **lap.detection} for lap in laps],
-            "latency_scans": latencies,
-        },
+        "detection": detection_metrics(laps),
         "localization": localization,
         "safety": {
             "collisions": sum(lap.collisions for lap in laps),

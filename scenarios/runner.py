@@ -14,7 +14,7 @@ The log types live in :mod:`scenarios.records` and are re-exported here.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from scenarios.observers import ProgressReporter, ScanCallback
 from scenarios.policies import known_objects
@@ -31,14 +31,16 @@ def run_scenario(
     gui: bool = False,
     progress: Callable[[float], None] | None = None,
     on_scan: Callable[[ScanRecord], None] | None = None,
+    observers: Sequence[object] = (),
 ) -> RunLog:
     """Run every lap of ``spec`` in a fresh PyBullet world and return the log.
 
     ``progress``, when given, is called with the simulated seconds advanced (for a
     progress bar). ``on_scan``, when given, is called once per safety-laser scan, after
     the local map update, with a :class:`ScanRecord` (e.g. to write a ROS 2 bag with
-    ``scenarios.bag``). Same spec (and seed) -> identical log and records, except the
-    timing figures.
+    ``scenarios.bag``). ``observers`` are added to the bench after those (e.g. a
+    :class:`~scenarios.recording.ScanRecorder`). Same spec (and seed) -> identical log and
+    records, except the timing figures.
 
     Examples
     --------
@@ -52,4 +54,6 @@ def run_scenario(
             bench.add_observer(ProgressReporter(progress))
         if on_scan is not None:
             bench.add_observer(ScanCallback(on_scan))
+        for observer in observers:
+            bench.add_observer(observer)
         return bench.run()

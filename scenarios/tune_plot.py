@@ -12,7 +12,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from scenarios.tune import METRICS, NEES_TARGET, _display, _settings_text, _toml_value
+from scenarios.tune_metrics import METRICS, NEES_TARGET
+from scenarios.tune_points import display_value, toml_value
+from scenarios.tune_table import settings_text
 
 __all__ = ["plot_sweep"]
 
@@ -64,7 +66,7 @@ def plot_sweep(summary: Mapping[str, Any], path: Path) -> None:
     )
     sort_label = METRICS[summary["sort"]].label
     if best is not None:
-        title += f"\nbest by {sort_label}: {_settings_text(best['settings'])}"
+        title += f"\nbest by {sort_label}: {settings_text(best['settings'])}"
     fig = Figure(layout="constrained")
     if len(grid) == 1:
         _plot_lines(fig, summary, grid, combinations, best)
@@ -85,13 +87,13 @@ def _plot_lines(fig, summary, grid, combinations, best) -> None:
     (key, values), = grid.items()
     numeric = _numeric_axis(values)
     x = np.array(values, dtype=float) if numeric else np.arange(len(values), dtype=float)
-    by_value = {_toml_value(row["settings"][key]): row for row in combinations}
+    by_value = {toml_value(row["settings"][key]): row for row in combinations}
     # A seed-only sweep has one run per x: there is no seed mean to draw dots around.
     several_seeds = len(summary["seeds"]) > 1 and key != "seed"
     fig.set_size_inches(14.0, 7.5)
     for ax, (heading, names) in zip(fig.subplots(2, 3).flat, LINE_PANELS, strict=True):
         for name in names:
-            y = [_as_float(by_value[_toml_value(value)][name]) for value in values]
+            y = [_as_float(by_value[toml_value(value)][name]) for value in values]
             ax.plot(x, y, marker="o", lw=2.2 if name == names[0] else 1.2,
                     label=METRICS[name].label + (" (seed mean)" if several_seeds else ""))
         if several_seeds:
@@ -110,7 +112,7 @@ def _plot_lines(fig, summary, grid, combinations, best) -> None:
         ax.set_title(heading, fontsize=10)
         ax.set_xlabel(key)
         if not numeric or len(values) <= 12:
-            ax.set_xticks(x, [_display(value) for value in values],
+            ax.set_xticks(x, [display_value(value) for value in values],
                           rotation=0 if numeric else 20)
         ax.grid(True, lw=0.3, alpha=0.5)
         ax.legend(fontsize=7)
@@ -123,13 +125,13 @@ def _plot_heatmaps(fig, grid, combinations, best) -> None:
 
     rows_key, cols_key = grid
     table = {
-        (_toml_value(row["settings"][rows_key]), _toml_value(row["settings"][cols_key])): row
+        (toml_value(row["settings"][rows_key]), toml_value(row["settings"][cols_key])): row
         for row in combinations
     }
     fig.set_size_inches(4.8 * len(HEATMAP_METRICS), 1.8 + 0.5 * max(3, len(grid[rows_key])))
     for ax, name in zip(fig.subplots(1, len(HEATMAP_METRICS)), HEATMAP_METRICS, strict=True):
         cells = np.array([
-            [_as_float(table[(_toml_value(r), _toml_value(c))][name]) for c in grid[cols_key]]
+            [_as_float(table[(toml_value(r), toml_value(c))][name]) for c in grid[cols_key]]
             for r in grid[rows_key]
         ])
         limits = {"vmin": 0.0, "vmax": 1.0} if name in SCORE_METRICS else {}
@@ -146,8 +148,8 @@ def _plot_heatmaps(fig, grid, combinations, best) -> None:
             j = grid[cols_key].index(best["settings"][cols_key])
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1.0, 1.0, fill=False, lw=2.5,
                                    edgecolor="tab:red"))
-        ax.set_xticks(range(len(grid[cols_key])), [_display(v) for v in grid[cols_key]])
-        ax.set_yticks(range(len(grid[rows_key])), [_display(v) for v in grid[rows_key]])
+        ax.set_xticks(range(len(grid[cols_key])), [display_value(v) for v in grid[cols_key]])
+        ax.set_yticks(range(len(grid[rows_key])), [display_value(v) for v in grid[rows_key]])
         ax.set_xlabel(cols_key)
         ax.set_ylabel(rows_key)
         ax.set_title(f"{METRICS[name].label} (bright is better)", fontsize=10)
@@ -167,7 +169,7 @@ def _plot_bars(fig, combinations) -> None:
             ax.set_xlim(0.0, 1.0)
         ax.set_title(METRICS[name].label, fontsize=10)
         ax.grid(True, axis="x", lw=0.3, alpha=0.5)
-    axes[0].set_yticks(positions, [_settings_text(row["settings"]) for row in shown], fontsize=7)
+    axes[0].set_yticks(positions, [settings_text(row["settings"]) for row in shown], fontsize=7)
     axes[0].invert_yaxis()
 
 

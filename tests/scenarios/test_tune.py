@@ -9,23 +9,10 @@ import pytest
 
 from scenarios.cli import main
 from scenarios.load import load_scenario
-from scenarios.tune import (
-    MAX_POINTS,
-    METRICS,
-    NEES_TARGET,
-    TIMING_COLUMNS,
-    PointResult,
-    combine_seeds,
-    format_ranking,
-    parse_grid,
-    parse_grids,
-    parse_seeds,
-    rank,
-    run_sweep,
-    sweep_points,
-    sweep_row,
-    write_sweep,
-)
+from scenarios.tune_metrics import METRICS, NEES_TARGET, TIMING_COLUMNS
+from scenarios.tune_points import MAX_POINTS, parse_grid, parse_grids, parse_seeds, sweep_points
+from scenarios.tune_run import PointResult, run_sweep
+from scenarios.tune_table import combine_seeds, format_ranking, rank, sweep_row, write_sweep
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny

@@ -1,0 +1,220 @@
+"""``semistatic tune --param``: parameters, bad input, Pareto front, resume after SIGKILL, Ray."""
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import optuna
+import pytest
+
+from scenarios.load import load_scenario
+from scenarios.tune_metrics import TIMING_COLUMNS
+from scenarios.tune_params import parse_param, parse_params
+from scenarios.tune_run import PoolBackend, RayBackend
+from semistatic.errors import SpecError
+from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
+from tests.scenarios.tiny_world import write_tiny
+
+KILL_AFTER = 3
+TRIALS = 7
+START_TIMEOUT_S = 180.0
+
+
+# ------------------------------------------------------------------ parameters
+@pytest.mark.parametrize(
+    ("text", "distribution"),
+    [
+        ("mapper.gate=0.05:0.2", optuna.distributions.FloatDistribution(0.05, 0.2)),
+        ("mapper.gate=0.01:0.1:log", optuna.distributions.FloatDistribution(0.01, 0.1, log=True)),
+        ("mapper.outlier_k=2:6", optuna.distributions.IntDistribution(2, 6)),
+        ("mapper.outlier_k=2,3,4", optuna.distributions.CategoricalDistribution((2, 3, 4))),
+        ("policy=conservative,adaptive",
+         optuna.distributions.CategoricalDistribution(("conservative", "adaptive"))),
+    ],
+)
+def test_params_become_optuna_distributions(text, distribution):
+    assert parse_param(text).distribution() == distribution
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("mapper.gate=0.2:0.1", "reversed range"),
+        ("mapper.gate=0.1:0.1", "empty range"),
+        ("mapper.gate=0:0.1:log", "log range needs LOW > 0"),
+        ("mapper.gate=0.1:x", "not a number"),
+        ("mapper.gate=0.1:0.2:cubic", "LOW:HIGH:log"),
+        ("mapper.gate=", "KEY=LOW:HIGH"),
+        ("mapper.gate=0.1,0.1", "appears twice"),
+    ],
+)
+def test_bad_params_are_refused_with_the_key(text, fragment):
+    with pytest.raises(SpecError, match=fragment) as error:
+        parse_param(text)
+    assert error.value.file == "--param"
+
+
+def test_a_key_given_twice_is_refused():
+    with pytest.raises(SpecError, match="given twice"):
+        parse_params(["mapper.gate=0.1:0.2", "mapper.gate=0.3:0.4"])
+
+
+def test_grid_values_cover_the_range_evenly():
+    assert parse_param("mapper.gate=0.1:0.3").grid_values(3) == (0.1, 0.2, 0.3)
+    assert parse_param("mapper.epsilon=0.001:0.1:log").grid_values(3) == (0.001, 0.01, 0.1)
+    assert parse_param("mapper.outlier_k=1:8:log").grid_values(4) == (1, 2, 4, 8)
+
+
+# ------------------------------------------------------------------ bad input, CLI
+@pytest.fixture
+def tiny(tmp_path):
+    return write_tiny(tmp_path)
+
+
+SEARCH = ["--laps", "1", "--objective", "f1", "--no-figures"]
+
+
+@pytest.mark.parametrize(
+    ("options", "fragments"),
+    [
+        (["--param", "mapper.gte=0.05:0.2"], ["--param: mapper.gte:", "did you mean 'gate'"]),
+        (["--param", "mapper.gate=0.05:9"], ["--param: mapper.gate:", "<= 5.0"]),
+        (["--param", "mapper.gate=0.2:0.05"], ["--param: mapper.gate:", "reversed range"]),
+        (["--param", "mapper.gate=0.2:0.2"], ["--param: mapper.gate:", "empty range"]),
+        (["--param", "mapper.gate=0.1:0.2", "--objective", "f2"], ["--objective: f2:"]),
+        (["--param", "mapper.gate=0.1:0.2", "--sampler", "tpx"], ["--sampler: tpx:"]),
+        (["--param", "mapper.gate=0.1:0.2", "--storage", "sqlite:////nonexistent/dir/s.db"],
+         ["--storage: sqlite:////nonexistent/dir/s.db:", "cannot open"]),
+        (["--param", "mapper.gate=0.1:0.2", "--storage", "nosuchdb://x"],
+         ["--storage: nosuchdb://x:", "cannot open"]),
+        (["--param", "mapper.gate=0.1:0.2", "--grid", "mapper.epsilon=0.03"], ["not both"]),
+        (["--param", "mapper.gate=0.1:0.2", "--sampler", "grid", "--grid-points", "3",
+          "--trials", "4"], ["--trials:", "grid's 3 points"]),
+    ],
+)
+def test_bad_search_input_exits_2_with_one_line_and_keeps_the_results(
+    tiny, tmp_path, capsys, options, fragments
+):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "sweep.json").write_text("{}")
+    status, _, err = run_cli(capsys, "tune", tiny, *SEARCH, *options, "--out", out)
+    assert status == 2
+    assert_one_error_line(err, *fragments)
+    assert sorted(path.name for path in out.iterdir()) == ["sweep.json"]
+
+
+def _finished(database):
+    with sqlite3.connect(database) as connection:
+        return connection.execute(
+            "SELECT number, state, datetime_complete FROM trials ORDER BY number"
+        ).fetchall()
+
+
+@pytest.mark.slow
+def test_search_writes_the_pareto_front_and_refuses_another_search_on_its_study(
+    tiny, tmp_path, capsys
+):
+    out = tmp_path / "out"
+    options = ["--laps", "1", "--param", "mapper.gate=0.05:0.3", "--param",
+               "mapper.outlier_k=2,3,4", "--objective", "rmse_xy_m", "--objective",
+               "total_lap_time_s", "--sampler", "random", "--trials", "3", "--jobs", "2"]
+    status, stdout, _ = run_cli(capsys, "tune", tiny, *options, "--out", out)
+    assert status == 0, stdout
+    study = json.loads((out / "study.json").read_text())
+    assert len(study["trials"]) == 3
+    assert (out / "figures" / "pareto.png").exists()
+    assert "--set mapper.gate=" in stdout
+    means = {row["trial"]: row["mean"] for row in study["trials"]}
+
+    def dominates(a, b):
+        return all(a[k] <= b[k] for k in a) and any(a[k] < b[k] for k in a)
+
+    front = {row["trial"] for row in study["pareto_front"]}
+    expected = {n for n in means if not any(dominates(means[m], means[n]) for m in means)}
+    assert front == expected
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert len(sweep["points"]) == 3
+    assert all(point["metrics"] for point in sweep["points"])
+
+    before = _finished(out / "study.db")
+    status, _, err = run_cli(capsys, "tune", tiny, *options[:-6], "--trials", "3",
+                             "--out", out)
+    assert status == 2
+    assert_one_error_line(err, "--storage: tune-tiny:", "another search")
+    assert _finished(out / "study.db") == before
+
+
+# ------------------------------------------------------------------ resume after SIGKILL
+def _search_command(scenario, out):
+    return [sys.executable, "-m", "scenarios.cli", "tune", str(scenario), "--laps", "1",
+            "--param", "mapper.gate=0.05:0.3", "--objective", "f1", "--trials", str(TRIALS),
+            "--no-figures", "--out", str(out)]
+
+
+@pytest.mark.slow
+def test_a_search_killed_after_three_trials_resumes_without_rerunning_them(tiny, tmp_path):
+    out = tmp_path / "out"
+    command = _search_command(tiny, out)
+    process = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    for line in process.stderr:
+        if f"{KILL_AFTER}/{TRIALS} trials done" in line:
+            break
+        assert time.monotonic() < deadline, "the search did not finish 3 trials in time"
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    killed = _finished(out / "study.db")
+    complete_before = [row for row in killed if row[1] == "COMPLETE"]
+    assert len(complete_before) >= KILL_AFTER
+
+    resumed = subprocess.run(command, cwd=tmp_path, capture_output=True, text=True,
+                             timeout=START_TIMEOUT_S, check=False)
+    assert resumed.returncode == 0, resumed.stderr
+    remaining = TRIALS - len(complete_before)
+    done_lines = [line for line in resumed.stderr.splitlines() if "trials done" in line]
+    assert len(done_lines) == remaining
+    assert done_lines[-1].startswith(f"tune tune-tiny: {remaining}/{remaining} trials done")
+    after = _finished(out / "study.db")
+    complete_after = [row for row in after if row[1] == "COMPLETE"]
+    assert len(complete_after) == TRIALS
+    # The trials finished before the kill were kept as they were, not run again.
+    assert set(complete_before) <= set(complete_after)
+    # A trial the kill interrupted was failed once and retried with its values.
+    interrupted = [row for row in after if row[1] == "FAIL"]
+    assert len(after) == TRIALS + len(interrupted)
+    study = json.loads((out / "study.json").read_text())
+    assert len(study["trials"]) == TRIALS
+    retried = [row for row in study["trials"] if row["retried_from"] is not None]
+    assert {row["retried_from"] for row in retried} == {row[0] for row in interrupted}
+
+
+# ------------------------------------------------------------------ Ray against the pool
+def _without_timing(metrics):
+    metrics = json.loads(json.dumps(metrics))
+    performance = metrics.pop("performance")
+    assert performance["wall_time_s"] >= 0
+    return metrics
+
+
+@pytest.mark.slow
+def test_ray_tasks_give_the_pool_results(tiny):
+    specs = [load_scenario(tiny, overrides=["laps=1", f"mapper.gate={gate}"])
+             for gate in (0.06, 0.2)]
+    results = {}
+    for name, backend in (("pool", PoolBackend(2)), ("ray", RayBackend(2))):
+        with backend:
+            for index, spec in enumerate(specs):
+                backend.submit(index, [spec], None)
+            done = []
+            while len(done) < len(specs):
+                done += backend.finished(timeout=1.0)
+        results[name] = {key: [_without_timing(m) for m, _ in outcomes]
+                         for key, outcomes in done}
+    assert results["ray"] == results["pool"]
+    assert TIMING_COLUMNS == ("wall_time_s",)
