@@ -172,5 +172,5 @@ def main_tune(args: argparse.Namespace) -> int:
         results = run_sweep(points, jobs=args.jobs, recordings=recordings,
                             on_result=lambda result: advance(result.point.label))
     summary = write_sweep(results, out, sort=args.sort, figures=not args.no_figures)
-    print(format_ranking(summary, out))
+    print(format_ranking(summary, out, figures=not args.no_figures))
     return 1 if any(result.failed for result in results) else 0

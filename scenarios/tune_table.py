@@ -250,7 +250,7 @@ def _cell(value: Any) -> str:
 
 
 def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
-                   limit: int = RANKING_ROWS) -> str:
+                   limit: int = RANKING_ROWS, figures: bool = True) -> str:
     """Return the ranked table of a sweep (means over seeds) and its best point, as text.
 
     Examples
@@ -259,6 +259,8 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
     >>> points = sweep_points("sim1", {"mapper.gate": [0.08, 0.12]})
     >>> summary = _sweep_summary([PointResult(points[0], {"detection": {"f1": 0.5}}),
     ...                           PointResult(points[1], {"detection": {"f1": 0.75}})], "f1")
+    >>> print(format_ranking(summary, "out", figures=False).splitlines()[-1])
+    results in out/ (sweep.csv, sweep.json)
     >>> print(format_ranking(summary, "out").splitlines()[-2])
     best by F1: mapper.gate=0.12 (0.75, 1 seed)
     """
@@ -293,7 +295,8 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
             f"best by {METRICS[sort].label}: {settings or 'the scenario as is'} "
             f"({_cell(best[sort])}, {'mean of ' * (seeds > 1)}{seeds} seed{'s' * (seeds > 1)})"
         )
-    text.append(f"results in {out}/ (sweep.csv, sweep.json, figures/sweep.png)")
+    written = ["sweep.csv", "sweep.json"] + (["figures/sweep.png"] if figures else [])
+    text.append(f"results in {out}/ ({', '.join(written)})")
     return "\n".join(text)
 
 
