@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import math
 import tomllib
 import typing
 from collections.abc import Iterable, Iterator, Mapping
@@ -28,7 +27,6 @@ from semistatic.errors import SpecError, join_key
 from semistatic.params import MapperParams
 from semistatic.validation import (
     FILE_KEY,
-    Range,
     as_table,
     convert,
     did_you_mean,
@@ -39,7 +37,6 @@ from semistatic.validation import (
 
 __all__ = [
     "DATA_DIR",
-    "MAPPER_BOUNDS",
     "OVERRIDE_FILE",
     "PAPER_SCENARIOS",
     "bundled_scenarios",
@@ -58,21 +55,12 @@ OVERRIDE_FILE = "--set"
 """The ``file`` named in errors about command-line overrides."""
 
 
-MAPPER_BOUNDS = {
-    "outlier_k": Range(ge=1, le=50),
-    "outlier_alpha": Range(gt=0.0, le=100.0),
-    "breakpoint_lambda": Range(gt=0.0, lt=round(math.pi / 2, 4)),
-    "breakpoint_sigma_r": Range(ge=0.0, le=1.0),
-    "min_points": Range(ge=2, le=1000),
-    "epsilon": Range(gt=0.0, le=1.0),
-    "max_range": Range(gt=0.0, le=100.0),
-    "gate": Range(gt=0.0, le=5.0),
-    "miss_limit": Range(ge=1, le=1000),
-    "visibility_margin": Range(ge=0.0, le=10.0),
+MAPPER_RANGES = {
+    field.name: field.metadata["range"]
+    for field in dataclasses.fields(MapperParams)
+    if "range" in field.metadata
 }
-"""Physical bounds of the mapper thresholds in files and options (m, rad, counts): a
-laser reaches at most 100 m, a polyline tolerance beyond 1 m or a gate beyond 5 m maps
-nothing real. :class:`MapperParams` itself checks only what the algorithms need."""
+"""The bounds of the mapper thresholds, from :class:`MapperParams`'s own fields."""
 
 
 def bundled_scenarios() -> tuple[str, ...]:
@@ -238,7 +226,7 @@ def mapper_from_table(
     >>> mapper_from_table({"max_range": -1.0}, file="--max-range", key="")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    semistatic.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0
+    semistatic.errors.SpecError: --max-range: max_range: must be > 0.0 and <= 100.0, got -1.0 (m)
     """
     table = as_table(value, file=file, key=key)
     keys = _known_keys(MapperParams)
@@ -249,13 +237,11 @@ def mapper_from_table(
         if typing.get_origin(hint) is typing.Literal:
             hint = str
         kwargs[name] = convert(hint, raw, file=file, key=join_key(key, name),
-                               valid=MAPPER_BOUNDS.get(name))
+                               valid=MAPPER_RANGES.get(name))
     try:
         return (base or MapperParams()).replace(**kwargs)
-    except ValueError as error:
-        name = str(error).split(" ", 1)[0].removeprefix("MapperParams.")
-        message = str(error).removeprefix(f"MapperParams.{name} ")
-        raise SpecError(file, join_key(key, name), message) from None
+    except SpecError as error:
+        raise error.located(file, key) from None
 
 
 def scenario_from_toml(

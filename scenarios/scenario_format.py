@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 from robots.presets import PRESETS
-from scenarios.load import MAPPER_BOUNDS
 from scenarios.spec import (
     BOX_ACTIONS,
     POLICIES,
@@ -157,7 +156,7 @@ def _bounds(cls: type, field: dataclasses.Field, hint: Any) -> str:
     if typing.get_origin(hint) is typing.Literal:
         return "one of " + ", ".join(typing.get_args(hint))
     parts = []
-    valid = MAPPER_BOUNDS.get(field.name) if cls is MapperParams else field.metadata.get("range")
+    valid = field.metadata.get("range")
     if valid is not None:
         parts.append(valid.describe())
     if field.metadata.get("safe_name"):

@@ -293,7 +293,7 @@ def sweep_points(
     >>> sweep_points("pal1", {"mapper.gate": [0.1, -0.1]})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    semistatic.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1
+    semistatic.errors.SpecError: --grid: mapper.gate: must be > 0.0 and <= 5.0, got -0.1 (m, ...)
     """
     grids = {key: tuple(values) for key, values in grids.items()}
     for key, values in grids.items():

@@ -11,7 +11,7 @@ Examples
 >>> MapperParams(gate=-1.0)  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-ValueError: MapperParams.gate must be > 0 (got -1.0): the restricted Hausdorff gate ...
+semistatic.errors.SpecError: <memory>: gate: must be > 0.0 and <= 5.0, got -1.0 (m, the ...
 >>> params.replace(gate=0.2).gate
 0.2
 """
@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
+
+from semistatic.errors import MEMORY, SpecError
+from semistatic.validation import bounds, check_fields, unlimited
 
 __all__ = ["HAUSDORFF_RESTRICTIONS", "VERTEX_PLACEMENTS", "MapperParams"]
 
@@ -81,54 +84,58 @@ class MapperParams:
 
     # extraction
     outlier_removal: bool = False
-    outlier_k: int = 4  # alpha < sqrt(2k) is needed to remove anything (extraction.py)
-    outlier_alpha: float = 2.5
-    breakpoint_lambda: float = math.radians(10.0)
-    breakpoint_sigma_r: float = 0.012
-    min_points: int = 2
-    epsilon: float = 0.03
+    # alpha < sqrt(2k) is needed to remove anything (extraction.py)
+    outlier_k: int = field(
+        default=4, metadata=bounds(ge=1, le=50, fix="readings, half width of the window")
+    )
+    outlier_alpha: float = field(
+        default=2.5, metadata=bounds(gt=0.0, le=100.0, fix="window standard deviations")
+    )
+    breakpoint_lambda: float = field(
+        default=math.radians(10.0),
+        metadata=bounds(gt=0.0, lt=round(math.pi / 2, 4),
+                        fix="rad, 10-20 deg (0.17-0.35 rad) is typical"),
+    )
+    breakpoint_sigma_r: float = field(
+        default=0.012, metadata=bounds(ge=0.0, le=1.0, fix="m, the scanner's range noise")
+    )
+    min_points: int = field(
+        default=2, metadata=bounds(ge=2, le=1000, fix="a polyline needs at least two points")
+    )
+    epsilon: float = field(
+        default=0.03, metadata=bounds(gt=0.0, le=1.0, fix="m, the Douglas-Peucker tolerance")
+    )
     vertex_placement: Literal["fitted", "raw"] = "fitted"
-    max_range: float = math.inf
-    # association and map
-    gate: float = 0.12
+    # A laser reaches at most 100 m; in code, inf keeps the scan's own limit.
+    max_range: float = field(
+        default=math.inf,
+        metadata={**bounds(gt=0.0, le=100.0, fix="m"),
+                  **unlimited()},
+    )
+    # association and map; a tolerance beyond 1 m or a gate beyond 5 m maps nothing real
+    gate: float = field(
+        default=0.12,
+        metadata=bounds(gt=0.0, le=5.0,
+                        fix="m, the restricted Hausdorff gate; the paper's is slightly "
+                            "above 0.10"),
+    )
     hausdorff_restriction: Literal["vertex", "projection"] = "vertex"
-    miss_limit: int = 5
-    visibility_margin: float = 0.15
+    miss_limit: int = field(
+        default=5, metadata=bounds(ge=1, le=1000, fix="visible misses before deletion")
+    )
+    visibility_margin: float = field(
+        default=0.15, metadata=bounds(ge=0.0, le=10.0, fix="m, occlusion tolerance")
+    )
 
     def __post_init__(self) -> None:
-        def fail(name: str, rule: str, hint: str) -> None:
-            value = getattr(self, name)
-            raise ValueError(f"MapperParams.{name} must be {rule} (got {value!r}): {hint}")
-
-        if not isinstance(self.outlier_removal, bool):
-            fail("outlier_removal", "True or False", "the paper's statistical outlier removal")
-        if not (isinstance(self.outlier_k, int) and self.outlier_k >= 1):
-            fail("outlier_k", "an integer >= 1", "half width of the outlier window")
-        if not self.outlier_alpha > 0:
-            fail("outlier_alpha", "> 0", "outlier threshold in window standard deviations")
-        if not 0 < self.breakpoint_lambda < math.pi / 2:
-            fail("breakpoint_lambda", "in (0, pi/2) rad", "10-20 deg (0.17-0.35 rad) is typical")
-        if not self.breakpoint_sigma_r >= 0:
-            fail("breakpoint_sigma_r", ">= 0", "the scanner's range noise in metres")
-        if not (isinstance(self.min_points, int) and self.min_points >= 2):
-            fail("min_points", "an integer >= 2", "a polyline needs at least two points")
-        if not self.epsilon > 0:
-            fail("epsilon", "> 0", "the Douglas-Peucker tolerance in metres, e.g. 0.03")
-        if self.vertex_placement not in VERTEX_PLACEMENTS:
-            fail("vertex_placement", f"one of {VERTEX_PLACEMENTS}", "see DESIGN.md detail 3")
-        if not self.max_range > 0:
-            fail("max_range", "> 0", "metres, or inf to keep the scan's own limit")
-        if not self.gate > 0:
-            fail(
-                "gate", "> 0",
-                "the restricted Hausdorff gate in metres, the paper uses slightly above 0.10",
-            )
-        if self.hausdorff_restriction not in HAUSDORFF_RESTRICTIONS:
-            fail("hausdorff_restriction", f"one of {HAUSDORFF_RESTRICTIONS}", "see DESIGN.md 5")
-        if not (isinstance(self.miss_limit, int) and self.miss_limit >= 1):
-            fail("miss_limit", "an integer >= 1", "visible misses before a polyline is deleted")
-        if not self.visibility_margin >= 0:
-            fail("visibility_margin", ">= 0", "occlusion tolerance in metres")
+        check_fields(self)
+        for name, choices in (("vertex_placement", VERTEX_PLACEMENTS),
+                              ("hausdorff_restriction", HAUSDORFF_RESTRICTIONS)):
+            if getattr(self, name) not in choices:
+                raise SpecError(
+                    MEMORY, name,
+                    f"must be one of {', '.join(choices)}, got {getattr(self, name)!r}",
+                )
 
     def replace(self, **changes: object) -> MapperParams:
         """Return a copy with some fields changed (validated again)."""

@@ -26,6 +26,7 @@ from scenarios.load import (
 )
 from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
 from semistatic.errors import SpecError
+from semistatic.params import MapperParams
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems
 from worlds.load import DATA_DIR as WORLD_DATA_DIR
 from worlds.load import load_world
@@ -543,6 +544,13 @@ def test_world_for_lap_counts_laps_from_1(lap):
         (lambda: BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, 1e7, 0.0)),
          '[[moves]]\nlap = 2\naction = "move"\nbox = "carton_aisle"\npose = [3.5, 1e7, 0.0]',
          "moves[0].pose"),
+        (lambda: MapperParams(gate=-0.1), "[mapper]\ngate = -0.1", "mapper.gate"),
+        (lambda: MapperParams(epsilon=2.0), "[mapper]\nepsilon = 2.0", "mapper.epsilon"),
+        (lambda: MapperParams(min_points=1), "[mapper]\nmin_points = 1", "mapper.min_points"),
+        (lambda: MapperParams(max_range=-1.0), "[mapper]\nmax_range = -1.0",
+         "mapper.max_range"),
+        (lambda: MapperParams(vertex_placement="snapped"),
+         '[mapper]\nvertex_placement = "snapped"', "mapper.vertex_placement"),
     ],
 )
 def test_spec_built_in_code_fails_as_the_file_would(tmp_path, build, text, key):
