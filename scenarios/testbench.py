@@ -35,6 +35,7 @@ import math
 import time
 from collections.abc import Mapping
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -507,22 +508,20 @@ class Testbench:
         if self.done:
             raise RuntimeError("Testbench: every lap has run; call reset() to start over")
 
-    def _observer_hooks(self, name: str) -> list:
+    def _observer_hooks(self, name: str) -> Any:
+        """Return the observers' ``name`` hooks, or ``"wants_polylines"``; cached."""
         if self._hooks is None:
             self._hooks = {
                 hook: [getattr(o, hook) for o in self.observers if hasattr(o, hook)]
                 for hook in ("on_tick", "on_scan", "on_lap_start", "on_lap_end")
             }
+            # Whether an ``on_scan`` observer may read ``ScanRecord.polylines``.
+            self._hooks["wants_polylines"] = any(
+                getattr(observer, "reads_map_polylines", True)
+                for observer in self.observers
+                if hasattr(observer, "on_scan")
+            )
         return self._hooks[name]
-
-    @property
-    def _wants_polylines(self) -> bool:
-        """Whether an ``on_scan`` observer may read ``ScanRecord.polylines``."""
-        return any(
-            getattr(observer, "reads_map_polylines", True)
-            for observer in self.observers
-            if hasattr(observer, "on_scan")
-        )
 
     def _apply_layout(self, layout: WorldSpec) -> None:
         """Make the simulated boxes match ``layout`` (move, add, remove by name)."""
@@ -675,7 +674,7 @@ class Testbench:
             ekf_covariance=robot.ekf.covariance,
             # Reading the whole map costs; only observers that may read it pay for it.
             polylines=tuple(line.points for line in local_map.world_polylines().values())
-            if self._wants_polylines
+            if self._observer_hooks("wants_polylines")
             else (),
             sensor_pose=sensor_world,
             report=report,
