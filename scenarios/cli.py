@@ -401,7 +401,8 @@ def _replay(args: argparse.Namespace) -> int:
         raw = alignment["table1_cm_log_pose"]["mean"]["avg"]
         aligned = (
             f"  aligned {alignment['accepted']}/{alignment['attempted']} revisit scans to the "
-            f"reference (median correction {alignment['translation_cm']['median']} cm, "
+            f"reference ({alignment['partial']} only in the directions their walls constrain; "
+            f"median correction {alignment['translation_cm']['median']} cm, "
             f"{alignment['rotation_deg']['median']} deg); at the logged poses: {raw} cm\n"
         )
     sigma_cm = metrics["noise"]["sigma_cm"]

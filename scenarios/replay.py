@@ -13,8 +13,9 @@ The paper's robot is localised on reflectors to about 1 cm; a log's poses come f
 elsewhere (SLAM), and on the Intel and ACES logs a revisit scan sits a median 2.8 cm away
 from where the first pass saw the same walls. With ``align`` (the default) each revisit
 scan is first aligned to the reference map of its tile
-(:func:`semistatic.alignment.align_points`: point-to-line ICP, bounded, rejected when the
-geometry does not constrain it), as a robot localised on its map would see the place; the
+(:func:`semistatic.alignment.align_points`: point-to-line ICP, bounded, corrected only in
+the directions the geometry constrains, e.g. across a corridor but not along it), as a robot
+localised on its map would see the place; the
 distances at the logged poses are kept beside (``alignment.table1_cm_log_pose``), with
 the correction statistics, in ``metrics.json``. Aligning does not shrink the figure by
 itself: on a log whose poses are right it leaves Table 1 unchanged
@@ -288,6 +289,8 @@ def _alignment_summary(alignments: list[Alignment], log_pose_distances: dict) ->
     return {
         "attempted": len(alignments),
         "accepted": len(accepted),
+        # Accepted with a direction the geometry leaves open kept as logged (a corridor).
+        "partial": sum(a.partial for a in accepted),
         "rejected": dict(sorted(reasons.items())),
         "translation_cm": spread([a.translation for a in accepted], 100.0),
         "rotation_deg": spread([a.rotation for a in accepted], 180.0 / math.pi),

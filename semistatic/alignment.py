@@ -11,9 +11,16 @@ It is deliberately conservative. Only points whose nearest reference point lies 
 segment and within ``max_distance`` take part (things absent from the reference, and
 points beyond a segment's end, constrain nothing); residuals are down-weighted with a
 Cauchy kernel; and the result is *rejected* (the initial pose is returned) when too few
-points match, when the geometry leaves a direction unconstrained (a straight corridor
-along its axis), when the correction exceeds ``max_translation``/``max_rotation``, or when
+points match, when the correction exceeds ``max_translation``/``max_rotation``, or when
 it does not lower the matched residual.
+
+Where the geometry leaves a direction unconstrained (a straight corridor along its axis)
+the pose is corrected only in the directions the points do constrain (across the
+corridor, the heading) and kept as given along the others: each Gauss-Newton step is
+solved in the eigenbasis of the normalised information matrix with the weak directions
+left out (the "solution remapping" of Zhang, Kaess and Singh, "On Degeneracy of
+Optimization-based State Estimation Problems", ICRA 2016). ``partial=False`` rejects
+such scans instead.
 
 Examples
 --------
@@ -58,6 +65,10 @@ INSIDE_TOLERANCE = 1e-9
 # ICP stops when a step moves the pose by less than this (m, and rad times 1 m).
 CONVERGED_STEP = 1e-5
 
+# An eigenvalue of the normalised information matrix at or below this is a singular
+# direction (the matched normals' weight is 1 in total).
+SINGULAR = 1e-12
+
 
 @dataclass(frozen=True)
 class AlignmentParams:
@@ -81,8 +92,14 @@ class AlignmentParams:
         Fewer matched points than this is rejected.
     min_constraint
         Smallest eigenvalue of the normalised information matrix (rotation column scaled
-        by the points' RMS lever arm): 0 when a direction is unconstrained (a corridor
-        along its axis), 0.5 for evenly spread wall directions. Below this is rejected.
+        by the points' RMS lever arm) for a direction to count as constrained: 0 when a
+        direction is unconstrained (a corridor along its axis), 0.5 for evenly spread
+        wall directions.
+    partial
+        Correct only the constrained directions when some are not (default), keeping the
+        given pose along the others; ``False`` rejects the scan instead. Replayed with
+        the defaults, partial corrections raise the accepted revisit scans from 460 to
+        549 of 763 on the Intel log and from 84 to 123 of 152 on ACES.
 
     Examples
     --------
@@ -99,6 +116,7 @@ class AlignmentParams:
     max_rotation: float = math.radians(5.0)
     min_points: int = 30
     min_constraint: float = 0.03
+    partial: bool = True
 
     def __post_init__(self) -> None:
         def fail(name: str, rule: str, hint: str) -> None:
@@ -118,7 +136,11 @@ class AlignmentParams:
         if not (isinstance(self.min_points, int) and self.min_points >= 3):
             fail("min_points", "an integer >= 3", "three unknowns need three matched points")
         if not 0 <= self.min_constraint <= 1:
-            fail("min_constraint", "in [0, 1]", "0 accepts any geometry, 0.03 rejects corridors")
+            fail("min_constraint", "in [0, 1]",
+                 "0 counts any direction as constrained, 0.03 not a corridor's axis")
+        if not isinstance(self.partial, bool):
+            fail("partial", "True or False",
+                 "correct the constrained directions only, or reject the scan")
 
 
 @dataclass(frozen=True)
@@ -144,6 +166,8 @@ class Alignment:
     constraint
         Smallest eigenvalue of the normalised information matrix (see
         :class:`AlignmentParams`).
+    partial
+        Whether some direction was left uncorrected (below ``min_constraint``).
 
     Examples
     --------
@@ -160,6 +184,7 @@ class Alignment:
     rms_before: float = math.nan
     rms_after: float = math.nan
     constraint: float = 0.0
+    partial: bool = False
 
     @property
     def translation(self) -> float:
@@ -324,19 +349,49 @@ def _jacobian(world: np.ndarray, normal: np.ndarray, centre: np.ndarray) -> np.n
     return np.column_stack([normal, turn])
 
 
-def _constraint(
-    jacobian: np.ndarray, world: np.ndarray, centre: np.ndarray, weights: np.ndarray
-) -> float:
-    """Return the smallest eigenvalue of the normalised information matrix.
+class _Normalised(NamedTuple):
+    """The weighted least-squares system of one ICP iteration, made dimensionless.
 
-    The rotation column is divided by the points' RMS lever arm, so that all three are
-    dimensionless and the trace is at most 2: a fraction of the matched normals' weight.
+    The rotation column is divided by the points' RMS lever arm (``scales``), so that all
+    three unknowns are comparable and the information matrix's trace is at most 2 (it is
+    divided by the total weight): its eigenvalues are fractions of the matched normals'
+    weight, ``values`` ascending with their unit eigenvectors as the columns of
+    ``vectors``; ``gradient`` is the right-hand side in the same units.
     """
-    lever = world - centre
-    scale = math.sqrt(float(np.mean(np.einsum("ij,ij->i", lever, lever)))) or 1.0
-    scaled = jacobian / np.array([1.0, 1.0, scale])
-    information = (scaled * weights[:, None]).T @ scaled / float(weights.sum())
-    return float(np.linalg.eigvalsh(information)[0])
+
+    scales: np.ndarray
+    values: np.ndarray
+    vectors: np.ndarray
+    gradient: np.ndarray
+
+    @classmethod
+    def of(cls, jacobian: np.ndarray, residual: np.ndarray, world: np.ndarray,
+           centre: np.ndarray, weights: np.ndarray) -> _Normalised:
+        lever = world - centre
+        scale = math.sqrt(float(np.mean(np.einsum("ij,ij->i", lever, lever)))) or 1.0
+        scales = np.array([1.0, 1.0, scale])
+        scaled = jacobian / scales
+        weighted = scaled * (weights / float(weights.sum()))[:, None]
+        values, vectors = np.linalg.eigh(weighted.T @ scaled)
+        return cls(scales, values, vectors, -weighted.T @ residual)
+
+    def step(self, min_constraint: float, partial: bool) -> np.ndarray | None:
+        """Return the Gauss-Newton step ``(dx, dy, dtheta)``, or None when it has none.
+
+        With ``partial`` the step is solved only along the eigenvectors whose eigenvalue
+        reaches ``min_constraint`` (None when none does); otherwise along all of them
+        (None when the system is singular).
+        """
+        if partial:
+            kept = self.values >= min_constraint
+            if not kept.any():
+                return None
+        else:
+            kept = self.values > SINGULAR
+            if not kept.all():
+                return None
+        basis = self.vectors[:, kept]
+        return basis @ (basis.T @ self.gradient / self.values[kept]) / self.scales
 
 
 def align_points(
@@ -366,16 +421,21 @@ def align_points(
 
     Examples
     --------
-    A straight corridor does not constrain motion along its axis: rejected.
+    A straight corridor does not constrain motion along its axis: the pose is corrected
+    across it (and in heading) and kept along it, or rejected with ``partial=False``.
 
     >>> walls = [[[-5.0, 1.0], [5.0, 1.0]], [[-5.0, -1.0], [5.0, -1.0]]]
     >>> starts, ends = polyline_segments(walls)
     >>> xs = np.linspace(-3.0, 3.0, 60)
     >>> points = np.vstack([np.column_stack([xs, np.ones(60)]),
-    ...                     np.column_stack([xs, -np.ones(60)])])
-    >>> result = align_points(points, starts, ends, pose=(0.0, 0.02, 0.0))
+    ...                     np.column_stack([xs, -np.ones(60)])])  # seen from (0, 0, 0)
+    >>> result = align_points(points, starts, ends, pose=(0.1, 0.02, 0.0))
+    >>> result.accepted, result.partial, result.pose.round(6).tolist()
+    (True, True, [0.1, 0.0, 0.0])
+    >>> result = align_points(points, starts, ends, pose=(0.1, 0.02, 0.0),
+    ...                       params=AlignmentParams(partial=False))
     >>> result.accepted, result.reason, result.pose.tolist()
-    (False, 'unconstrained direction', [0.0, 0.02, 0.0])
+    (False, 'unconstrained direction', [0.1, 0.02, 0.0])
     """
     params = AlignmentParams() if params is None else params
     points = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -386,19 +446,29 @@ def align_points(
         raise ValueError(f"align_points: pose must be a finite (x, y, theta), got {initial}")
     points = points[np.isfinite(points).all(axis=1)]
 
-    def rejected(reason: str, found: np.ndarray | None = None, **extra: object) -> Alignment:
-        correction = np.zeros(3) if found is None else _difference(found, initial)
-        return Alignment(initial.copy(), correction, False, reason, **extra)
-
     if len(points) < params.min_points or len(starts) == 0:
-        return rejected("too few points")
+        return _rejected(initial, "too few points")
     # A point moves by at most max_translation + reach * max_rotation before the result is
     # rejected: segments farther than that (plus the gate) from every point never match.
     reach = float(np.sqrt((points**2).sum(axis=1)).max())
     margin = params.max_distance + params.max_translation + reach * params.max_rotation
     reference = _Reference.of(starts, ends).candidates(transform_points(initial, points), margin)
     if len(reference.start) == 0:
-        return rejected("too few points")
+        return _rejected(initial, "too few points")
+    # The full solve first: where it finds the geometry constrained, nothing changes. Only a
+    # scan it rejects as unconstrained is solved again in the constrained directions alone
+    # (a match far off can look degenerate at its first iterations; solved partially from
+    # there it would stall and pass a null correction as an alignment).
+    found = _iterate(points, reference, initial, params, partial=False)
+    if params.partial and found.reason == "unconstrained direction":
+        found = _iterate(points, reference, initial, params, partial=True)
+    return found
+
+
+def _iterate(points: np.ndarray, reference: _Reference, initial: np.ndarray,
+             params: AlignmentParams, *, partial: bool) -> Alignment:
+    """Return the ICP of ``points`` on ``reference`` from ``initial`` (:func:`align_points`)."""
+
     def weighted_matches(at: np.ndarray):
         """Return the points matched at pose ``at``: mask, residuals, normals, points, weights."""
         world = transform_points(at, points)
@@ -411,13 +481,12 @@ def align_points(
         matched, residual, normal, world, weights = weighted_matches(current)
         count = int(np.count_nonzero(matched))
         if count < params.min_points:
-            return rejected("too few points", current, matched=count)
-        jacobian = _jacobian(world, normal, current[:2])
-        weighted = jacobian * weights[:, None]
-        try:
-            step = np.linalg.solve(weighted.T @ jacobian, -weighted.T @ residual)
-        except np.linalg.LinAlgError:
-            return rejected("unconstrained direction", current)
+            return _rejected(initial, "too few points", current, matched=count)
+        system = _Normalised.of(_jacobian(world, normal, current[:2]), residual, world,
+                                current[:2], weights)
+        step = system.step(params.min_constraint, partial)
+        if step is None:
+            return _rejected(initial, "unconstrained direction", current)
         # The step rotates the points about the sensor and then moves them.
         current = np.array(
             [current[0] + step[0], current[1] + step[1], wrap_angle(float(current[2] + step[2]))]
@@ -428,8 +497,9 @@ def align_points(
     matched, residual, normal, world, weights = weighted_matches(current)
     count = int(np.count_nonzero(matched))
     if count < params.min_points:
-        return rejected("too few points", current, matched=count)
-    constraint = _constraint(_jacobian(world, normal, current[:2]), world, current[:2], weights)
+        return _rejected(initial, "too few points", current, matched=count)
+    constraint = float(_Normalised.of(_jacobian(world, normal, current[:2]), residual, world,
+                                      current[:2], weights).values[0])
     # The same points at the initial pose: did the correction explain them better?
     _, _, _, distance_before = reference.matches(
         transform_points(initial, points[matched]), params.max_distance
@@ -437,17 +507,24 @@ def align_points(
     rms_before = float(np.sqrt(np.mean(distance_before**2)))
     rms_after = float(np.sqrt(np.mean(residual**2)))
     extra = {"matched": count, "rms_before": rms_before, "rms_after": rms_after,
-             "constraint": constraint}
+             "constraint": constraint, "partial": constraint < params.min_constraint}
     correction = _difference(current, initial)
-    if constraint < params.min_constraint:
-        return rejected("unconstrained direction", current, **extra)
+    if constraint < params.min_constraint and not partial:
+        return _rejected(initial, "unconstrained direction", current, **extra)
     if math.hypot(correction[0], correction[1]) > params.max_translation:
-        return rejected("translation beyond max_translation", current, **extra)
+        return _rejected(initial, "translation beyond max_translation", current, **extra)
     if abs(correction[2]) > params.max_rotation:
-        return rejected("rotation beyond max_rotation", current, **extra)
+        return _rejected(initial, "rotation beyond max_rotation", current, **extra)
     if rms_after > rms_before:
-        return rejected("no better than the initial pose", current, **extra)
+        return _rejected(initial, "no better than the initial pose", current, **extra)
     return Alignment(current, correction, True, "", **extra)
+
+
+def _rejected(initial: np.ndarray, reason: str, found: np.ndarray | None = None,
+              **extra: object) -> Alignment:
+    """Return a rejected alignment: ``initial`` kept, the correction to ``found`` reported."""
+    correction = np.zeros(3) if found is None else _difference(found, initial)
+    return Alignment(initial.copy(), correction, False, reason, **extra)
 
 
 def _difference(found: np.ndarray, initial: np.ndarray) -> np.ndarray:

@@ -63,15 +63,39 @@ def test_correct_pose_stays_put():
     assert result.rotation < math.radians(0.05)
 
 
-def test_rejects_a_straight_corridor_and_keeps_the_pose():
+def test_straight_corridor_is_corrected_only_across_its_axis():
+    # Seen from the origin; the guess is 10 cm off along the axis (which the walls cannot
+    # tell), 3 cm across it and 1 deg in heading (which they can).
+    rng = np.random.default_rng(5)
+    points = scan_points(CORRIDOR, (0.0, 0.0, 0.0), rng)
+    guess = np.array([0.1, 0.03, math.radians(1.0)])
+    result = align_points(points, *reference(CORRIDOR), guess)
+    assert result.accepted
+    assert result.partial
+    assert result.constraint < AlignmentParams().min_constraint
+    assert abs(result.pose[0] - guess[0]) < 0.002  # along the axis: as given
+    assert abs(result.pose[1]) < 0.002  # across: the truth, within the noise's effect
+    assert abs(result.pose[2]) < math.radians(0.05)
+
+
+def test_straight_corridor_rejected_without_partial_corrections():
     rng = np.random.default_rng(5)
     points = scan_points(CORRIDOR, (0.0, 0.0, 0.0), rng)
     guess = np.array([0.1, 0.03, 0.0])
-    result = align_points(points, *reference(CORRIDOR), guess)
+    result = align_points(points, *reference(CORRIDOR), guess, AlignmentParams(partial=False))
     assert not result.accepted
     assert result.reason == "unconstrained direction"
     assert result.constraint < AlignmentParams().min_constraint
     np.testing.assert_array_equal(result.pose, guess)
+
+
+def test_constrained_room_is_not_a_partial_alignment():
+    rng = np.random.default_rng(4)
+    points = scan_points(ROOM, TRUE_POSE, rng)
+    result = align_points(points, *reference(ROOM), TRUE_POSE + np.array([0.04, -0.02, 0.01]))
+    assert result.accepted
+    assert not result.partial
+    assert result.constraint >= AlignmentParams().min_constraint
 
 
 def test_corridor_with_a_door_recess_is_constrained():
@@ -203,7 +227,7 @@ def test_polyline_segments_takes_polylines_and_arrays():
     [
         ("max_distance", 0.0), ("noise", -0.01), ("max_translation", 0.0),
         ("max_rotation", 0.0), ("iterations", 0), ("iterations", 2.5), ("min_points", 2),
-        ("min_constraint", -0.1), ("min_constraint", 1.5),
+        ("min_constraint", -0.1), ("min_constraint", 1.5), ("partial", "yes"),
     ],
 )
 def test_params_are_validated(field, value):
