@@ -31,6 +31,7 @@ import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.fitting import fit_polylines
+from semistatic.frames import transform_points
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline
 from semistatic.types import Scan, beam_directions
@@ -38,6 +39,7 @@ from semistatic.types import Scan, beam_directions
 __all__ = [
     "MAX_BRIDGED_GAP",
     "douglas_peucker",
+    "douglas_peucker_rows",
     "extract_polylines",
     "remove_invalid",
     "remove_outliers",
@@ -287,13 +289,19 @@ def _douglas_peucker_lines(points: np.ndarray, line_ids: np.ndarray, epsilon: fl
     return shapely.get_coordinates(simplified, include_z=True)[:, 2].astype(np.int64)
 
 
-def _douglas_peucker_rows(rows: list[list[float]], epsilon: float) -> list[int]:
+def douglas_peucker_rows(rows: list[list[float]], epsilon: float) -> list[int]:
     """Return the indices :func:`douglas_peucker` keeps, with Python floats (>= 1 row).
 
     GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
     operation) and rules (the first farthest point on ties, kept only when strictly
     farther than ``epsilon``): the same vertices, and for a few points faster than a GEOS
-    call.
+    call. For callers that hold a few finite vertices as lists (a merge) and a checked
+    ``epsilon >= 0``; :func:`douglas_peucker` checks its input and picks the faster way.
+
+    Examples
+    --------
+    >>> douglas_peucker_rows([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0]], 0.05)
+    [0, 2, 3]
     """
     keep = [True] * len(rows)
     sections = [(0, len(rows) - 1)]
@@ -364,12 +372,14 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     if points.shape[0] <= 2:
         return np.arange(points.shape[0], dtype=np.int64)
     if points.shape[0] <= PYTHON_DOUGLAS_PEUCKER:
-        return np.array(_douglas_peucker_rows(points.tolist(), float(epsilon)), dtype=np.int64)
+        return np.array(douglas_peucker_rows(points.tolist(), float(epsilon)), dtype=np.int64)
     return _douglas_peucker_lines(points, np.zeros(points.shape[0], np.int64), float(epsilon))
 
 
-def extract_polylines(scan: Scan, params: MapperParams | None = None) -> list[Polyline]:
-    """Extract the polylines of one scan in the scan's sensor frame (paper Sec. 3.1).
+def extract_polylines(
+    scan: Scan, params: MapperParams | None = None, *, pose: ArrayLike | None = None
+) -> list[Polyline]:
+    """Extract the polylines of one scan in the sensor frame or a map's (paper Sec. 3.1).
 
     Invalid readings are removed, then outliers, the remaining beams are split at
     breakpoints into intervals of at least ``params.min_points`` beams, and each interval
@@ -381,6 +391,9 @@ def extract_polylines(scan: Scan, params: MapperParams | None = None) -> list[Po
         The laser scan; only ranges and beam angles are used (not its pose).
     params
         Extraction thresholds; ``MapperParams()`` when omitted.
+    pose
+        Sensor pose ``(x, y, theta)`` in a map's frame: the polylines are returned in that
+        frame (all vertices moved in one transform). Default: the sensor frame.
 
     Returns
     -------
@@ -395,9 +408,18 @@ def extract_polylines(scan: Scan, params: MapperParams | None = None) -> list[Po
     ...             angle_increment=0.01)
     >>> [line.scan_indices.tolist() for line in extract_polylines(scan)]
     [[0, 5], [9, 14]]
+    >>> extract_polylines(scan, pose=(1.0, 2.0, np.pi / 2))[0].points.round(3)
+    array([[1.07 , 2.998],
+           [1.02 , 3.   ]])
     """
     params = MapperParams() if params is None else params
     vertices, beams, bounds = _extracted_vertices(scan, params)
+    if pose is not None:
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        if not np.isfinite(pose).all():
+            raise ValueError(f"extract_polylines: pose must be a finite (x, y, theta), got {pose}")
+        # A fresh array of finite points: the polylines can be views of it, unchecked.
+        vertices = transform_points(pose, vertices)
     return Polyline._split(vertices, beams, bounds)
 
 

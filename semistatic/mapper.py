@@ -50,18 +50,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
-from semistatic.extraction import _extracted_vertices
-from semistatic.frames import transform_points
-from semistatic.merge import END_TOLERANCE_FACTOR, _merge_rows, join
+from semistatic.extraction import extract_polylines
+from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observation
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
-from semistatic.visibility import (
-    MAX_END_EXTENSION,
-    _extended_rows,
-    _observed,
-    is_missing,
-)
+from semistatic.visibility import MAX_END_EXTENSION, extend_ends, is_missing
 
 __all__ = [
     "MAX_MERGE_WEIGHT",
@@ -358,20 +352,13 @@ class PolylineMap:
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        x, y = pose[:2].tolist()
         observed = {
-            index: _extended_rows(
-                scan_lines[index].points.tolist(), scan.angle_increment, x, y, MAX_END_EXTENSION
-            )
+            index: extend_ends(scan_lines[index], scan.angle_increment, viewpoint=pose)
             for index in [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
         }
-        changed = self._merge_associated(
-            {index: rows for index, (rows, _) in observed.items()}, associated, stamp
-        )
+        changed = self._merge_associated(observed, associated, stamp)
         new_ids = self._insert_new(
-            [_observed(scan_lines[index], *observed[index]) for index in unassociated
-             if index in observed],
-            stamp,
+            [observed[index] for index in unassociated if index in observed], stamp
         )
         changed.update(new_ids)
         clock.lap("merge")
@@ -495,7 +482,7 @@ class PolylineMap:
 
     def _merge_associated(
         self,
-        scan_rows: Mapping[int, list[list[float]]],
+        observed: Mapping[int, Polyline],
         associated: tuple[Association, ...],
         stamp: float,
     ) -> set[int]:
@@ -507,10 +494,10 @@ class PolylineMap:
         for map_id, scan_indices in by_map.items():
             entry = self._entries[map_id]
             line = entry.polyline
-            weight = float(min(entry.hits, MAX_MERGE_WEIGHT))
-            for index in scan_indices:
-                # merge() with its checks done once: epsilon > 0 (MapperParams), weight >= 0.
-                line = _merge_rows(line, scan_rows[index], epsilon, weight, tolerance)
+            line = merge_observation(
+                line, [observed[index] for index in scan_indices], epsilon,
+                map_weight=float(min(entry.hits, MAX_MERGE_WEIGHT)), end_tolerance=tolerance,
+            )
             self._entries[map_id] = _replaced(
                 entry,
                 polyline=line,
@@ -582,13 +569,8 @@ def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
 def _map_frame_polylines(
     scan: Scan, params: MapperParams, pose: np.ndarray
 ) -> tuple[Polyline, ...]:
-    """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame.
-
-    All vertices are moved in one transform, and the polylines are views of that one
-    fresh array of finite points: nothing to check or copy.
-    """
-    vertices, beams, bounds = _extracted_vertices(scan, params)
-    return tuple(Polyline._split(transform_points(pose, vertices), beams, bounds))
+    """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame."""
+    return tuple(extract_polylines(scan, params, pose=pose))
 
 
 class _StageClock:

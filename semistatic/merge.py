@@ -41,13 +41,13 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-from semistatic.association import _near_boxes
+from semistatic.association import box_gaps
 from semistatic.extraction import (
     PYTHON_DOUGLAS_PEUCKER,
-    _douglas_peucker_rows,
     douglas_peucker,
+    douglas_peucker_rows,
 )
-from semistatic.hausdorff import _restricted_distance
+from semistatic.hausdorff import restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline
 
 __all__ = [
@@ -55,6 +55,7 @@ __all__ = [
     "MIN_OVERLAP",
     "join",
     "merge",
+    "merge_observation",
     "overlaps",
     "project_onto",
 ]
@@ -268,7 +269,7 @@ def _simplified(rows: list[list[float]], epsilon: float) -> Polyline:
     if len(rows) <= 2:
         return _polyline(rows)
     if len(rows) <= PYTHON_DOUGLAS_PEUCKER:
-        return _polyline([rows[k] for k in _douglas_peucker_rows(rows, epsilon)])
+        return _polyline([rows[k] for k in douglas_peucker_rows(rows, epsilon)])
     points = np.array(rows, dtype=np.float64)
     line = shapely.simplify(shapely.linestrings(points), epsilon, preserve_topology=False)
     kept = shapely.get_coordinates(line)
@@ -345,15 +346,57 @@ def merge(
     >>> len(merge(box, [[0.4, 0.01], [0.6, -0.01]], epsilon=0.03))  # a partial view
     3
     """
+    return _merged_parts("merge", map_polyline, [scan_polyline], epsilon, map_weight,
+                         end_tolerance)
+
+
+def merge_observation(
+    map_polyline: Polyline | ArrayLike,
+    parts: Sequence[Polyline | ArrayLike],
+    epsilon: float,
+    *,
+    map_weight: float = 1.0,
+    end_tolerance: float | None = None,
+) -> Polyline:
+    """Merge the scan polylines one observation associated with a map polyline.
+
+    A map polyline may be associated with several polylines of one scan (an object cut
+    by an occluder): each is merged in turn with :func:`merge`, all with the same
+    ``map_weight``, since together they are one observation. Parameters as :func:`merge`.
+
+    Examples
+    --------
+    >>> wall = [[0.0, 0.0], [4.0, 0.0]]
+    >>> parts = [[[0.0, 0.02], [1.5, 0.02]], [[2.5, 0.02], [4.0, 0.02]]]  # a pillar between
+    >>> merge_observation(wall, parts, epsilon=0.03).points.round(3)
+    array([[0.  , 0.01],
+           [4.  , 0.01]])
+    """
+    return _merged_parts("merge_observation", map_polyline, parts, epsilon, map_weight,
+                         end_tolerance)
+
+
+def _merged_parts(
+    caller: str,
+    map_polyline: Polyline | ArrayLike,
+    parts: Sequence[Polyline | ArrayLike],
+    epsilon: float,
+    map_weight: float,
+    end_tolerance: float | None,
+) -> Polyline:
+    """Return :func:`merge_observation` with its parameters checked once for ``caller``."""
     if not epsilon > 0.0:
-        raise ValueError(f"merge: epsilon must be > 0 m, got {epsilon!r}")
+        raise ValueError(f"{caller}: epsilon must be > 0 m, got {epsilon!r}")
     if not map_weight >= 0.0:
-        raise ValueError(f"merge: map_weight must be >= 0, got {map_weight!r}")
+        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weight!r}")
     tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
     if not tolerance >= 0.0:
-        raise ValueError(f"merge: end_tolerance must be >= 0 m, got {end_tolerance!r}")
-    scan_rows = as_polyline(scan_polyline).points.tolist()
-    return _merge_rows(as_polyline(map_polyline), scan_rows, epsilon, map_weight, tolerance)
+        raise ValueError(f"{caller}: end_tolerance must be >= 0 m, got {end_tolerance!r}")
+    line = as_polyline(map_polyline)
+    for part in parts:
+        line = _merge_rows(line, as_polyline(part).points.tolist(), epsilon, map_weight,
+                           tolerance)
+    return line
 
 
 def _merge_rows(
@@ -586,10 +629,9 @@ def overlaps(
         extents = max(span01, span10) > MIN_OVERLAP
     if not extents:
         return False
-    # Stops early above the gate: the value is then a lower bound, failing it just the same.
     line0 = Polyline._trusted(points0, np.arange(points0.shape[0], dtype=np.int64))
     line1 = Polyline._trusted(points1, np.arange(points1.shape[0], dtype=np.int64))
-    return _restricted_distance(line0, line1, mode, limit=gate) <= gate
+    return restricted_hausdorff(line0, line1, mode) <= gate
 
 
 def join(
@@ -661,8 +703,8 @@ def join(
         return k
 
     if count > 1:
-        boxes = [line.box for line in lines]
-        near = _near_boxes(boxes, boxes, gate)
+        boxes = np.array([line.box for line in lines], dtype=np.float64)
+        near = (box_gaps(boxes, boxes) <= gate).tolist()
         # Pairs with a changed member only; the components do not depend on the order.
         pairs = sorted(
             (min(a, b), max(a, b))

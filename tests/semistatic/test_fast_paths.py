@@ -20,7 +20,7 @@ import pytest
 import shapely
 
 from semistatic.association import FAR_COST, _optimal_path
-from semistatic.extraction import _douglas_peucker_rows
+from semistatic.extraction import douglas_peucker_rows
 from semistatic.frames import untransform_points
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, _replaced
@@ -189,7 +189,7 @@ def test_douglas_peucker_python_twin_keeps_what_geos_keeps(seed):
     if seed % 3 == 0:
         points = points.round(1)  # exact ties, repeated and collinear points
     epsilon = float(rng.choice([0.0, 0.03, 0.1, 0.3]))
-    kept = _douglas_peucker_rows(points.tolist(), epsilon)
+    kept = douglas_peucker_rows(points.tolist(), epsilon)
     geometry = shapely.Point(points[0]) if count == 1 else shapely.LineString(points)
     expected = shapely.get_coordinates(shapely.simplify(geometry, epsilon, preserve_topology=False))
     np.testing.assert_array_equal(points[kept], expected)
