@@ -12,7 +12,11 @@ life cycle (DESIGN.md detail 10):
   (the scan reads through it: :func:`semistatic.visibility.is_missing`) is ``"blank"``
   and counts a miss; after ``params.miss_limit`` consecutive misses it is deleted. One out
   of view, out of range or occluded counts nothing and is never deleted, and neither does
-  one the scan still reads in place although the association did not pair it.
+  one the scan still reads in place although the association did not pair it;
+- where the scan reads through *part* of a map polyline it observed or still reads in place
+  (``params.free_space_cut``, :func:`semistatic.visibility.free_space_cut`), that part is
+  cut away: a box pushed along its own face leaves no stale face. Pieces of an observed
+  polyline that this scan did not observe count a miss.
 
 Two choices beyond the paper: association compares the scan polylines as extracted, but
 what is merged or inserted has its ends moved half a beam gap outward
@@ -47,6 +51,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
@@ -55,7 +60,7 @@ from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observation
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
-from semistatic.visibility import MAX_END_EXTENSION, extend_ends, is_missing
+from semistatic.visibility import MAX_END_EXTENSION, extend_ends, free_space_cut, is_missing
 
 __all__ = [
     "MAX_MERGE_WEIGHT",
@@ -357,6 +362,9 @@ class PolylineMap:
             for index in [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
         }
         changed = self._merge_associated(observed, associated, stamp)
+        seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
+        cut_away = self._cut_free_space(changed, scan, pose, seen) if params.free_space_cut else []
+        changed.difference_update(cut_away)
         new_ids = self._insert_new(
             [observed[index] for index in unassociated if index in observed], stamp
         )
@@ -376,12 +384,14 @@ class PolylineMap:
         ]
         clock.lap("join")
 
-        missed, deleted = [], []
+        missed, deleted = [], list(cut_away)
+        present = []
         for map_id in unpaired_ids:
             if map_id in absorbed or map_id in joined_survivors:
                 continue
             entry = self._entries[map_id]
             if not is_missing(entry.polyline, scan, pose, params):
+                present.append(map_id)
                 continue
             missed.append(map_id)
             if entry.misses + 1 >= params.miss_limit:
@@ -389,6 +399,9 @@ class PolylineMap:
                 deleted.append(map_id)
             else:
                 self._entries[map_id] = _replaced(entry, status="blank", misses=entry.misses + 1)
+        if params.free_space_cut:
+            # Not associated and not missing: still where it was, except perhaps in part.
+            deleted += self._cut_free_space(set(present), scan, pose, {})
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
@@ -507,6 +520,48 @@ class PolylineMap:
                 last_seen=stamp,
             )
         return set(by_map)
+
+    def _cut_free_space(
+        self, ids: set[int], scan: Scan, pose: np.ndarray, seen: Mapping[int, Polyline]
+    ) -> list[int]:
+        """Cut the parts of polylines ``ids`` that ``scan`` reads through; return those gone.
+
+        The piece nearest to what the scan saw of it (``seen``, by map id) keeps the id and
+        state. The others are parts this scan did not confirm, and it contradicted the
+        polyline they came from: new ids, counted as a miss (status ``"blank"``), so that
+        what a moving thing leaves behind goes as a miss would. A polyline read through
+        everywhere is deleted.
+        """
+        gone = []
+        for map_id in sorted(ids):
+            entry = self._entries[map_id]
+            pieces = free_space_cut(entry.polyline, scan, pose, self.params)
+            if len(pieces) == 1 and pieces[0] is entry.polyline:
+                continue
+            if not pieces:
+                del self._entries[map_id]
+                gone.append(map_id)
+                continue
+            observation = shapely.LineString(seen[map_id].points) if map_id in seen else None
+            nearest = 0 if observation is None else int(np.argmin([
+                shapely.distance(shapely.LineString(piece.points), observation)
+                for piece in pieces
+            ]))
+            self._entries[map_id] = _replaced(entry, polyline=pieces[nearest])
+            # Unobserved pieces of an observed polyline count a miss; of an unobserved one,
+            # all keep its state.
+            other = {} if observation is None else {
+                "status": "blank", "misses": entry.misses + 1
+            }
+            for k, piece in enumerate(pieces):
+                if k == nearest:
+                    continue
+                self._entries[self._next_id] = _replaced(
+                    entry, id=self._next_id, polyline=piece, **other
+                )
+                ids.add(self._next_id)
+                self._next_id += 1
+        return gone
 
     def _insert_new(self, new_lines: list[Polyline], stamp: float) -> list[int]:
         new_ids = []

@@ -80,6 +80,10 @@ class MapperParams:
     visibility_margin
         A map point counts as occluded when the scan reads more than this (m) shorter
         along its bearing.
+    free_space_cut
+        Cut the parts of an observed map polyline that the scan reads through, beyond
+        ``visibility_margin`` (:func:`semistatic.visibility.free_space_cut`): a box
+        pushed along its own face leaves no stale face in the map. On by default.
     """
 
     # extraction
@@ -126,6 +130,7 @@ class MapperParams:
     visibility_margin: float = field(
         default=0.15, metadata=bounds(ge=0.0, le=10.0, fix="m, occlusion tolerance")
     )
+    free_space_cut: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -7,7 +7,10 @@ Two parts of the mapper reason about single beams rather than whole polylines:
   beams at the polyline, :func:`visible_beams` counts those in view, unoccluded and seen
   through, and :func:`should_be_visible` / :func:`is_missing` decide;
 - :func:`extend_ends` removes the bias of a scan polyline's ends, which the last beam on
-  an object leaves up to half a beam gap short of its true end.
+  an object leaves up to half a beam gap short of its true end;
+- :func:`free_space_cut` removes the parts of a map polyline that the scan reads through
+  (an object moved along its own face: the map's ends agree with the scan, its middle
+  does not).
 
 Examples
 --------
@@ -40,6 +43,7 @@ __all__ = [
     "BeamCounts",
     "expected_ranges",
     "extend_ends",
+    "free_space_cut",
     "is_missing",
     "should_be_visible",
     "visible_beams",
@@ -56,6 +60,11 @@ MISSING_FRACTION = 0.5
 
 # Beams (nearly) parallel to an edge do not hit it.
 PARALLEL_TOLERANCE = 1e-12
+
+# Consecutive beams that must read through a map polyline before free_space_cut removes
+# that part: two, the fewest readings that make a polyline (MapperParams.min_points), so
+# one noisy reading cuts nothing.
+MIN_SEEN_THROUGH = 2
 
 # Largest end extension (m) of extend_ends: at grazing incidence the gap to the next beam
 # grows without bound, while the end it hides can only be this much farther on average.
@@ -95,6 +104,18 @@ def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
 
 def _edge_hits(points: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
     """Return :func:`expected_ranges` of ``N >= 2`` vertices for beam directions (cos, sin)."""
+    return _edge_crossings(points, cos, sin)[0]
+
+
+def _edge_crossings(
+    points: np.ndarray, cos: np.ndarray, sin: np.ndarray, *, arcs: bool = False
+) -> tuple[np.ndarray, _Crossings | None]:
+    """Return each beam's first hit on ``N >= 2`` vertices: range and, with ``arcs``, where.
+
+    Where (:class:`_Crossings`): the arc-length position of the hit along the polyline,
+    its distance along the hit edge to that edge's nearer end, and the sine of the angle
+    between beam and edge (``nan`` for no hit).
+    """
     starts = points[:-1]
     edges = np.diff(points, axis=0)
     dx, dy = cos[:, None], sin[:, None]
@@ -108,7 +129,33 @@ def _edge_hits(points: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarr
         & (along_edge >= 0.0)
         & (along_edge <= 1.0)
     )
-    return np.where(hit, along_beam, math.inf).min(axis=1)
+    ranges = np.where(hit, along_beam, math.inf)
+    if not arcs:
+        return ranges.min(axis=1), None
+    edge = ranges.argmin(axis=1)
+    beams = np.arange(ranges.shape[0])
+    lengths = np.hypot(edges[:, 0], edges[:, 1])
+    position = np.concatenate(([0.0], np.cumsum(lengths)))[edge] + (
+        along_edge[beams, edge] * lengths[edge]
+    )
+    first = ranges[beams, edge]
+    hit_any = np.isfinite(first)
+    fraction = along_edge[beams, edge]
+    to_end = np.minimum(fraction, 1.0 - fraction) * lengths[edge]
+    sine = np.abs(denominator[beams, edge]) / np.where(lengths[edge] > 0.0, lengths[edge], 1.0)
+    return first, _Crossings(
+        np.where(hit_any, position, math.nan),
+        np.where(hit_any, to_end, math.nan),
+        np.where(hit_any, sine, math.nan),
+    )
+
+
+class _Crossings(NamedTuple):
+    """Where beams cross a polyline (see :func:`_edge_crossings`)."""
+
+    arc: np.ndarray
+    to_end: np.ndarray
+    sine: np.ndarray
 
 
 def _beams_in_sector(points: np.ndarray, scan: Scan) -> tuple[int, int]:
@@ -274,20 +321,174 @@ def visible_beams(
     (4, 3, 2)
     """
     points = untransform_points(pose, as_polyline(polyline).points)
+    states = _beam_states(points, scan, max_range, margin)
+    return BeamCounts(
+        int(states.in_view.sum()), int(states.unoccluded.sum()), int(states.seen_through.sum())
+    )
+
+
+class _BeamStates(NamedTuple):
+    """Per-beam masks of :func:`visible_beams`, over consecutive beams of a scan."""
+
+    in_view: np.ndarray
+    unoccluded: np.ndarray
+    seen_through: np.ndarray
+    expected: np.ndarray
+    ranges: np.ndarray
+    crossings: _Crossings | None
+
+
+def _beam_states(
+    points: np.ndarray, scan: Scan, max_range: float, margin: float, *, arcs: bool = False
+) -> _BeamStates:
+    """Return :func:`visible_beams`'s per-beam masks for sensor-frame vertices ``points``.
+
+    Over consecutive beams (only those of the polyline's sector when it has an edge: the
+    others cannot hit it), with the expected and read ranges; ``crossings`` (with
+    ``arcs``, for ``N >= 2`` vertices) says where each beam crosses the polyline.
+    """
+    arc = None
     if points.shape[0] < 2:
         expected, ranges = expected_ranges(points, scan.angles()), scan.ranges
     else:
         # Only the beams of the polyline's sector can hit it: the others expect inf.
         first, stop = _beams_in_sector(points, scan)
         cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
-        expected = _edge_hits(points, cos[first:stop], sin[first:stop])
+        expected, arc = _edge_crossings(points, cos[first:stop], sin[first:stop], arcs=arcs)
         ranges = scan.ranges[first:stop]
     limit = min(scan.range_max, max_range)
     in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= limit)
     with np.errstate(invalid="ignore"):
         unoccluded = in_view & (ranges >= expected - margin)
         seen_through = unoccluded & (ranges > expected + margin)
-    return BeamCounts(int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum()))
+    return _BeamStates(in_view, unoccluded, seen_through, expected, ranges, arc)
+
+
+def free_space_cut(
+    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
+) -> list[Polyline]:
+    """Return the parts of a map polyline that ``scan`` does not read through.
+
+    Where at least ``MIN_SEEN_THROUGH`` consecutive beams see through the polyline (read
+    clearly beyond it, as in :func:`visible_beams` with ``params.visibility_margin``), the
+    space there is free: the polyline is cut from half way to the crossing of the beam
+    before that run to half way to the crossing of the beam after it (to its end where
+    that beam misses it).
+
+    It works at the scale of the association gate (``params.gate``), below which the
+    mapper follows a change by merging: only a span at least the gate wide is cut (one
+    beam, noise or a person walking cut nothing), and a piece shorter than the gate left
+    between cuts goes with them. The polyline is known to within ``params.epsilon``
+    across, so a beam counts only if it would read through it wherever it lay within
+    that: crossing an edge farther than ``epsilon / tan(angle)`` from the edge's ends,
+    and reading beyond it by ``epsilon / sin(angle)`` more than the margin (a grazing
+    beam, or one passing a corner by a centimetre, cuts nothing). The same beams make
+    :func:`is_missing` delete a polyline that is read through almost everywhere; this
+    removes the part of one that is still there elsewhere (an object moved along its own
+    face, a door that opened in a wall).
+
+    Parameters
+    ----------
+    polyline
+        Map polyline in the frame of ``pose``.
+    scan
+        The scan (ranges and beam angles are used).
+    pose
+        Sensor pose ``(x, y, theta)`` in the map frame.
+    params
+        ``max_range`` and ``visibility_margin`` are used.
+
+    Returns
+    -------
+    list of Polyline
+        ``[polyline]`` itself when nothing is cut, else the remaining pieces in the
+        polyline's order (scan indices: vertex order), possibly none.
+
+    Examples
+    --------
+    >>> wall = [[2.0, -1.0], [2.0, 1.0]]  # a wall 2 m ahead; beams 0.1 rad apart
+    >>> angles = np.arange(-0.4, 0.45, 0.1)
+    >>> ranges = 2.0 / np.cos(angles)
+    >>> ranges[5:7] = 4.0  # two beams read through it, 0.2 and 0.4 m left of centre
+    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
+    >>> [piece.points.round(3).tolist()
+    ...  for piece in free_space_cut(wall, scan, (0.0, 0.0, 0.0), MapperParams())]
+    [[[2.0, -1.0], [2.0, 0.1]], [[2.0, 0.512], [2.0, 1.0]]]
+    """
+    line = as_polyline(polyline)
+    points = untransform_points(pose, line.points)
+    if points.shape[0] < 2:
+        return [line]
+    states = _beam_states(points, scan, params.max_range, params.visibility_margin, arcs=True)
+    crossing = states.crossings
+    # Read through wherever within epsilon across the polyline lay (see above).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cosine = np.sqrt(1.0 - crossing.sine**2)
+        robust = (
+            states.seen_through
+            & (crossing.to_end * crossing.sine >= params.epsilon * cosine)
+            & (states.ranges
+               > states.expected + params.visibility_margin + params.epsilon / crossing.sine)
+        )
+    cuts = _seen_through_spans(robust, crossing.arc, line.length, params.gate)
+    if not cuts:
+        return [line]
+    pieces, start = [], 0.0
+    for low, high in cuts:
+        if low > start:
+            pieces.append((start, low))
+        start = max(start, high)
+    if start < line.length:
+        pieces.append((start, line.length))
+    return [_arc_piece(line, low, high) for low, high in pieces if high - low >= params.gate]
+
+
+def _seen_through_spans(
+    seen_through: np.ndarray, arc: np.ndarray, length: float, min_span: float
+) -> list[tuple[float, float]]:
+    """Return the sorted arc-length spans, ``min_span`` or longer, that seen-through runs cut."""
+    flags = seen_through.tolist()
+    positions = arc.tolist()
+    count = len(flags)
+    spans = []
+    start = 0
+    while start < count:
+        if not flags[start]:
+            start += 1
+            continue
+        stop = start
+        while stop + 1 < count and flags[stop + 1]:
+            stop += 1
+        if stop - start + 1 >= MIN_SEEN_THROUGH:
+            run = positions[start : stop + 1]
+            low, high = min(run), max(run)
+            # Each end of the run reaches half way to its neighbour's crossing, or the
+            # polyline's end on the side where that neighbour misses it.
+            for end, neighbour in ((start, start - 1), (stop, stop + 1)):
+                at_low = positions[end] == low
+                other = positions[neighbour] if 0 <= neighbour < count else math.nan
+                if math.isnan(other):
+                    bound = 0.0 if at_low else length
+                else:
+                    bound = 0.5 * (positions[end] + other)
+                if at_low:
+                    low = min(low, bound)
+                else:
+                    high = max(high, bound)
+            if high - low >= min_span:
+                spans.append((low, high))
+        start = stop + 1
+    return sorted(spans)
+
+
+def _arc_piece(line: Polyline, low: float, high: float) -> Polyline:
+    """Return the part of ``line`` between arc-length positions ``low < high``."""
+    points = line.points
+    arcs = np.concatenate(([0.0], np.cumsum(line.edge_lengths)))
+    ends = [np.interp(value, arcs, points[:, axis]) for value in (low, high) for axis in (0, 1)]
+    inside = points[(arcs > low) & (arcs < high)]
+    rows = np.vstack(([ends[0], ends[1]], inside, [ends[2], ends[3]]))
+    return Polyline(rows)
 
 
 def should_be_visible(

@@ -1,0 +1,116 @@
+"""Free-space cut: map polyline parts that a scan reads through are removed, nothing else."""
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from semistatic.mapper import PolylineMap
+from semistatic.params import MapperParams
+from semistatic.polyline import Polyline
+from semistatic.types import Scan
+from semistatic.visibility import free_space_cut
+from tests.semistatic.synthetic import box, cast_scan, scene, wall
+
+PARAMS = MapperParams()
+ORIGIN = (0.0, 0.0, 0.0)
+WALL = Polyline([[2.0, -1.0], [2.0, 1.0]])  # 2 m ahead of the origin
+
+
+def wall_scan(through: slice, step: float = 0.02) -> Scan:
+    """Beams every ``step`` rad over +-0.5 rad reading the wall, except ``through`` (4 m)."""
+    count = round(1.0 / step) + 1
+    angles = -0.5 + step * np.arange(count)
+    ranges = 2.0 / np.cos(angles)
+    ranges[through] = 4.0
+    return Scan(ranges=ranges, angle_min=-0.5, angle_increment=step)
+
+
+def test_a_run_of_beams_reading_through_cuts_out_that_part():
+    scan = wall_scan(slice(30, 36))
+    pieces = free_space_cut(WALL, scan, ORIGIN, PARAMS)
+    # Hand-computed reference: the beams cross the wall at y = 2 tan(angle); the cut runs
+    # from half way between beams 29 and 30 to half way between beams 35 and 36.
+    crossing = 2.0 * np.tan(-0.5 + 0.02 * np.arange(51))
+    low, high = 0.5 * (crossing[29] + crossing[30]), 0.5 * (crossing[35] + crossing[36])
+    expected = shapely.LineString(WALL.points).difference(
+        shapely.LineString([[2.0, low], [2.0, high]])
+    )
+    result = shapely.MultiLineString([piece.points for piece in pieces])
+    assert len(pieces) == 2
+    assert shapely.hausdorff_distance(result, expected) < 1e-9
+
+
+def test_nothing_read_through_returns_the_polyline_itself():
+    scan = wall_scan(slice(0, 0))
+    assert free_space_cut(WALL, scan, ORIGIN, PARAMS) == [WALL]
+    assert free_space_cut(WALL, scan, ORIGIN, PARAMS)[0] is WALL
+
+
+def test_one_beam_or_a_span_narrower_than_the_gate_cuts_nothing():
+    # One beam through: noise, or a reading slipping past.
+    assert free_space_cut(WALL, wall_scan(slice(30, 31)), ORIGIN, PARAMS)[0] is WALL
+    # Two beams 0.005 rad apart span about 2 cm of the wall: below the 12 cm gate (a person
+    # walking past, merged rather than cut).
+    scan = wall_scan(slice(100, 102), step=0.005)
+    assert free_space_cut(WALL, scan, ORIGIN, PARAMS)[0] is WALL
+
+
+def test_read_through_everywhere_leaves_nothing():
+    assert free_space_cut(WALL, wall_scan(slice(None)), ORIGIN, PARAMS) == []
+
+
+def test_grazing_beams_past_an_end_cut_nothing():
+    # A face seen almost edge-on (beams 3-5 deg off its line) from beside its end: a
+    # centimetre of lateral error moves where those beams cross it by decimetres, so
+    # reading past it is no evidence against it.
+    face = Polyline([[0.5, 0.05], [3.0, 0.2]])
+    angles = np.radians(np.arange(-5.0, 5.01, 0.5))
+    scan = Scan(ranges=np.full(angles.size, 6.0), angle_min=angles[0],
+                angle_increment=math.radians(0.5))
+    assert free_space_cut(face, scan, ORIGIN, PARAMS)[0] is face
+
+
+def pushed_box_map(params: MapperParams) -> list[shapely.LineString]:
+    """Map a 0.5 m box against a wall at y = -1.0, then pushed 0.5 m east along it."""
+    south_wall = wall((-3.0, -1.0), (6.0, -1.0))
+    before = scene(south_wall, box((1.25, -0.75), 0.5, 0.5))
+    after = scene(south_wall, box((1.75, -0.75), 0.5, 0.5))
+    rng = np.random.default_rng(0)
+    world = PolylineMap(params)
+    for x in np.linspace(0.0, 1.5, 16):
+        world.update(cast_scan(before, (x, 0.2, 0.0), noise=0.005, rng=rng), (x, 0.2, 0.0))
+    for x in np.linspace(1.5, 0.0, 16):
+        world.update(cast_scan(after, (x, 0.2, 0.0), noise=0.005, rng=rng), (x, 0.2, 0.0))
+    return [shapely.LineString(line.points) for line in world.polylines().values()
+            if len(line) >= 2]
+
+
+# The old front face (y = -0.5, x 1.0-1.5), where the robot now reads the wall behind; its
+# part within visibility_margin of that wall cannot be told from it and may stay.
+VACATED = shapely.box(1.05, -0.6, 1.45, -0.4)
+
+
+def test_a_box_pushed_along_its_wall_leaves_no_old_face_in_the_map():
+    # The front face is collinear before and after the push, so no scan contradicts the
+    # old map polyline's ends; the free space where the box stood is read through.
+    lines = pushed_box_map(PARAMS)
+    assert lines
+    assert not any(line.intersects(VACATED) for line in lines)
+    # The box is still mapped where it stands now: its front face at y = -0.5.
+    front = shapely.LineString([[1.55, -0.5], [1.95, -0.5]])
+    assert any(shapely.hausdorff_distance(front, line.intersection(front.buffer(0.05))) < 0.05
+               for line in lines if line.intersects(front.buffer(0.05)))
+
+
+def test_the_cut_is_an_option():
+    # Without it the old face stays (the defect the cut removes).
+    lines = pushed_box_map(PARAMS.replace(free_space_cut=False))
+    assert any(line.intersects(VACATED) for line in lines)
+
+
+@pytest.mark.parametrize("value", ["yes", 1])
+def test_the_option_is_validated(value):
+    with pytest.raises(ValueError, match="free_space_cut"):
+        MapperParams(free_space_cut=value)
