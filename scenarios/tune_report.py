@@ -1,7 +1,8 @@
 """What a person reads of a search: ranking, best point, Pareto front, importances, curve.
 
 :func:`study_report` summarises a finished study (JSON-ready): every trial with its
-parameter values and, per objective, the mean over seeds, the worst case and the spread;
+parameter values and, per objective, the mean over its runs (every scenario with every
+seed), the worst case and the spread;
 the ranking by mean and by worst case; the Pareto front (several objectives); parameter
 importances (Optuna's fANOVA); the best value after each trial (the search curve); and
 the best point as a ready ``--set`` line and a TOML snippet. :func:`format_study` prints
@@ -107,6 +108,7 @@ def study_report(study: optuna.Study, config: SearchConfig) -> dict[str, Any]:
             "worst": trial.user_attrs.get("worst", {}),
             "spread": trial.user_attrs.get("spread", {}),
             "seeds": trial.user_attrs.get("seeds", []),
+            "runs": trial.user_attrs.get("runs", []),
             "error": trial.user_attrs.get("error"),
             "retried_from": optuna.storages.RetryHeartbeatStaleTrialCallback.retried_trial_number(
                 trial
@@ -183,7 +185,9 @@ def format_study(report: Mapping[str, Any], out: str | Path) -> str:
         text.append(f"trial {row['trial']} failed: {row['error']}")
     best = report["best"]
     if best is not None:
-        text.append(f"best by {objectives[0]} (mean over {len(best['seeds'])} seed(s)): "
+        runs = best["runs"] or [f"seed={seed}" for seed in best["seeds"]]
+        text.append(f"best by {objectives[0]} (mean over {len(runs)} run(s): "
+                    f"{', '.join(runs)}): "
                     f"{_number(best['mean'][objectives[0]])}")
         text.append(f"  {best['set']}")
         text.append("  as TOML:\n" + "".join(f"    {line}\n" for line in

@@ -45,7 +45,8 @@ def sweep_row(result: PointResult) -> dict[str, Any]:
     (0, 0.1, 2, 0.8, None, '')
     """
     point = result.point
-    row: dict[str, Any] = {"point": point.index, **dict(point.settings), "seed": point.seed}
+    row: dict[str, Any] = {"point": point.index, **dict(point.settings),
+                           "scenario": point.spec.name, "seed": point.seed}
     for name in METRICS:
         row[name] = metric_value(result.metrics, name)
     row["error"] = result.error or ""

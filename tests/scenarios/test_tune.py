@@ -226,7 +226,7 @@ def test_written_sweep_has_one_row_per_point_and_ranks_seed_means(tmp_path):
     assert [row["seed"] for row in rows] == ["0", "1", "0", "1"]
     assert rows[1]["table1_mean_avg_cm"] == ""
     assert rows[3]["error"] == "RuntimeError: robot lost"
-    assert list(rows[0]) == ["point", restriction, "seed", *METRICS, "error"]
+    assert list(rows[0]) == ["point", restriction, "scenario", "seed", *METRICS, "error"]
     data = json.loads((out / "sweep.json").read_text())
     assert data["grid"] == {restriction: ["vertex", "projection"]}
     assert data["seeds"] == [0, 1]
