@@ -90,8 +90,8 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "--recording", dest="recordings", action="append", default=[], type=Path,
         metavar="DIR",
         help="replay the mapper on this recording (`semistatic run SCENARIO --record DIR`) "
-             "instead of re-simulating; one per seed; only mapper thresholds under the "
-             "conservative policy (they cannot change the motion)",
+             "instead of re-simulating; one per scenario and seed; only mapper thresholds "
+             "under the conservative policy (they cannot change the motion)",
     )
     search = tune.add_argument_group(
         "search with Optuna (instead of --grid)",

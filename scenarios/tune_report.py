@@ -154,6 +154,11 @@ def _number(value: Any) -> str:
     return str(value)
 
 
+def _param_cell(value: Any) -> str:
+    # Four significant digits in the table; the --set line and TOML keep the exact value.
+    return _number(value) if isinstance(value, float) else display_value(value)
+
+
 def format_study(report: Mapping[str, Any], out: str | Path) -> str:
     """Return the printed summary: ranking (mean, worst, spread), front, importances, best."""
     objectives = report["objectives"]
@@ -165,7 +170,7 @@ def format_study(report: Mapping[str, Any], out: str | Path) -> str:
     table = [header]
     for rank, number in enumerate(report["ranking_by_mean"][:RANKING_ROWS], start=1):
         row = rows[number]
-        line = [str(rank), str(number), *(display_value(row["params"][k]) for k in keys)]
+        line = [str(rank), str(number), *(_param_cell(row["params"][k]) for k in keys)]
         for name in objectives:
             line += [_number(row[which].get(name)) for which in ("mean", "worst", "spread")]
         table.append(line)

@@ -1,11 +1,12 @@
 """Threshold search with Optuna: a study in a storage, trials on a backend, resumable.
 
 ``semistatic tune SCENARIO --param mapper.gate=0.05:0.20 --trials 20`` asks Optuna's
-sampler (TPE, random or grid) for parameter values, runs each trial (every seed of it,
-replayed from recordings or re-simulated) on a backend (:mod:`scenarios.tune_run`) and
-tells the study the objectives: the mean over the seeds of each ``--objective`` (several
-make a multi-objective study with a Pareto front). Every trial keeps its full metrics,
-per seed, in the study's user attributes, with the worst case and the spread.
+sampler (TPE, random or grid) for parameter values, runs each trial (every scenario of
+``SCENARIO[,SCENARIO...]`` with every seed, replayed from recordings or re-simulated) on a
+backend (:mod:`scenarios.tune_run`) and tells the study the objectives: the mean over the
+trial's runs of each ``--objective`` (several make a multi-objective study with a Pareto
+front). Every trial keeps its full metrics, per run, in the study's user attributes, with
+the worst case and the spread (robust thresholds: rank by either).
 
 The study lives in an Optuna RDB storage (by default ``DIR/study.db``, SQLite). The
 driver records a heartbeat for every trial it runs; a trial left running by a killed
