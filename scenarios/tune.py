@@ -64,7 +64,9 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "--seeds), rank the results and write DIR/sweep.csv, DIR/sweep.json and "
                     "DIR/figures/sweep.png.",
     )
-    tune.add_argument("scenario", help="bundled name (sim1, sim2, pal1, pal3a, pal3b) or a .toml")
+    tune.add_argument("scenario", help="bundled name (sim1, sim2, pal1, pal3a, pal3b) or a .toml; "
+                                       "with --param several, comma-separated (pal1,sim1): "
+                                       "every trial runs each of them")
     tune.add_argument(
         "--grid", dest="grids", action="append", default=[], metavar="KEY=V1,V2,...",
         help="values to sweep, e.g. --grid mapper.gate=0.08,0.12 --grid policy=conservative,"
@@ -88,8 +90,8 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "--recording", dest="recordings", action="append", default=[], type=Path,
         metavar="DIR",
         help="replay the mapper on this recording (`semistatic run SCENARIO --record DIR`) "
-             "instead of re-simulating; one per seed; only mapper thresholds under the "
-             "conservative policy (they cannot change the motion)",
+             "instead of re-simulating; one per scenario and seed; only mapper thresholds "
+             "under the conservative policy (they cannot change the motion)",
     )
     search = tune.add_argument_group(
         "search with Optuna (instead of --grid)",
@@ -146,6 +148,9 @@ def main_tune(args: argparse.Namespace) -> int:
         from scenarios.tune_study import main_search  # Optuna only when searching
 
         return main_search(args)
+    if "," in args.scenario:
+        raise SpecError("scenario", args.scenario, "several scenarios are searched together "
+                        "with --param (every trial runs each); --grid sweeps one")
     if args.sort not in METRICS:
         raise SpecError(
             "--sort", args.sort,

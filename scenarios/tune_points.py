@@ -215,6 +215,17 @@ class SweepPoint:
         return self.spec.seed
 
     @property
+    def run(self) -> str:
+        """Return ``SCENARIO seed=S``: which recorded or simulated run the point is.
+
+        Examples
+        --------
+        >>> sweep_points("sim1", {"policy": ["adaptive"]}, seeds=[2])[0].run
+        'sim1 seed=2'
+        """
+        return f"{self.spec.name} seed={self.seed}"
+
+    @property
     def label(self) -> str:
         """Return ``key=value ... seed=S``: the grid values and the seed.
 

@@ -1,7 +1,8 @@
 """What a person reads of a search: ranking, best point, Pareto front, importances, curve.
 
 :func:`study_report` summarises a finished study (JSON-ready): every trial with its
-parameter values and, per objective, the mean over seeds, the worst case and the spread;
+parameter values and, per objective, the mean over its runs (every scenario with every
+seed), the worst case and the spread;
 the ranking by mean and by worst case; the Pareto front (several objectives); parameter
 importances (Optuna's fANOVA); the best value after each trial (the search curve); and
 the best point as a ready ``--set`` line and a TOML snippet. :func:`format_study` prints
@@ -107,6 +108,7 @@ def study_report(study: optuna.Study, config: SearchConfig) -> dict[str, Any]:
             "worst": trial.user_attrs.get("worst", {}),
             "spread": trial.user_attrs.get("spread", {}),
             "seeds": trial.user_attrs.get("seeds", []),
+            "runs": trial.user_attrs.get("runs", []),
             "error": trial.user_attrs.get("error"),
             "retried_from": optuna.storages.RetryHeartbeatStaleTrialCallback.retried_trial_number(
                 trial
@@ -152,6 +154,11 @@ def _number(value: Any) -> str:
     return str(value)
 
 
+def _param_cell(value: Any) -> str:
+    # Four significant digits in the table; the --set line and TOML keep the exact value.
+    return _number(value) if isinstance(value, float) else display_value(value)
+
+
 def format_study(report: Mapping[str, Any], out: str | Path) -> str:
     """Return the printed summary: ranking (mean, worst, spread), front, importances, best."""
     objectives = report["objectives"]
@@ -163,7 +170,7 @@ def format_study(report: Mapping[str, Any], out: str | Path) -> str:
     table = [header]
     for rank, number in enumerate(report["ranking_by_mean"][:RANKING_ROWS], start=1):
         row = rows[number]
-        line = [str(rank), str(number), *(display_value(row["params"][k]) for k in keys)]
+        line = [str(rank), str(number), *(_param_cell(row["params"][k]) for k in keys)]
         for name in objectives:
             line += [_number(row[which].get(name)) for which in ("mean", "worst", "spread")]
         table.append(line)
@@ -183,7 +190,9 @@ def format_study(report: Mapping[str, Any], out: str | Path) -> str:
         text.append(f"trial {row['trial']} failed: {row['error']}")
     best = report["best"]
     if best is not None:
-        text.append(f"best by {objectives[0]} (mean over {len(best['seeds'])} seed(s)): "
+        runs = best["runs"] or [f"seed={seed}" for seed in best["seeds"]]
+        text.append(f"best by {objectives[0]} (mean over {len(runs)} run(s): "
+                    f"{', '.join(runs)}): "
                     f"{_number(best['mean'][objectives[0]])}")
         text.append(f"  {best['set']}")
         text.append("  as TOML:\n" + "".join(f"    {line}\n" for line in

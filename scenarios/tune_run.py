@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import queue
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,7 @@ __all__ = [
     "run_point",
     "run_points",
     "run_sweep",
+    "warm_worker",
 ]
 
 BACKENDS = ("pool", "ray")
@@ -107,7 +109,7 @@ class RecordingSet:
         if laps is None:
             laps = manifests[0]["laps"]
         if seeds is None:
-            seeds = tuple(sorted(manifest["seed"] for manifest in manifests))
+            seeds = tuple(sorted({manifest["seed"] for manifest in manifests}))
         return laps, seeds
 
     def recordings(self) -> list[Recording]:
@@ -143,12 +145,12 @@ def run_point(spec: ScenarioSpec, recordings: RecordingSet | None = None) -> Out
     One extreme threshold that makes a run fail (e.g. the robot never re-localises)
     should cost its own row, not the hours of the rest of the sweep.
     """
-    from scenarios.outputs import summarize
-    from scenarios.runner import run_scenario
-
     try:
         if recordings is not None and recordings.paths:
             return replay(recordings.for_spec(spec), spec), None
+        from scenarios.outputs import summarize
+        from scenarios.runner import run_scenario
+
         return summarize(run_scenario(spec)), None
     except Exception as error:  # recorded in the point's row, see the docstring
         return None, f"{type(error).__name__}: {error}"
@@ -217,6 +219,38 @@ def run_points(specs: Sequence[ScenarioSpec], recordings: RecordingSet | None = 
     return [run_point(spec, recordings) for spec in specs]
 
 
+SINGLE_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                           "NUMBA_NUM_THREADS")
+"""Environment variables that make a Ray worker's thread pools single-threaded."""
+
+WARM_HOLD_S = 0.5
+"""How long a warm-up task keeps its worker busy, so each of them starts its own worker."""
+
+
+def warm_worker(recordings: RecordingSet | None = None, hold_s: float = 0.0) -> int:
+    """Do a worker's one-off work before its first trial; return its process id.
+
+    Imports the closed loop, reads the recordings (kept for every later point of this
+    worker), then keeps the worker busy ``hold_s`` seconds so that concurrent warm-up
+    tasks land on different workers.
+
+    Examples
+    --------
+    >>> import os
+    >>> warm_worker() == os.getpid()
+    True
+    """
+    import os
+
+    import scenarios.outputs
+    import scenarios.runner  # noqa: F401 (the imports are the work)
+
+    if recordings is not None:
+        recordings.recordings()
+    time.sleep(hold_s)
+    return os.getpid()
+
+
 class PoolBackend:
     """Run tasks in ``jobs`` worker processes of this machine (they die with it).
 
@@ -242,6 +276,12 @@ class PoolBackend:
 
     def __exit__(self, *exc_info) -> bool | None:
         return self._context.__exit__(*exc_info)
+
+    def warm_up(self, recordings: RecordingSet | None = None) -> int:
+        """Give every worker its one-off work now (:func:`warm_worker`); return how many ran it."""
+        pids = self._pool.starmap(warm_worker, [(recordings, WARM_HOLD_S)] * self.capacity,
+                                  chunksize=1)
+        return len(set(pids))
 
     def submit(self, key: Any, specs: Sequence[ScenarioSpec],
                recordings: RecordingSet | None) -> None:
@@ -283,11 +323,14 @@ class RayBackend:
         self._ray = ray
         self._started = not ray.is_initialized()
         if self._started:
+            # A task holds one CPU: thread pools (BLAS, OpenMP, numba) of one thread each,
+            # or the tasks of a node would compete for its cores.
+            single = {"env_vars": {name: "1" for name in SINGLE_THREAD_VARIABLES}}
             if self.address is None:
                 ray.init(num_cpus=self.jobs, include_dashboard=False, log_to_driver=False,
-                         configure_logging=False)
+                         configure_logging=False, runtime_env=single)
             else:
-                ray.init(address=self.address, log_to_driver=False)
+                ray.init(address=self.address, log_to_driver=False, runtime_env=single)
         cpus = int(ray.cluster_resources().get("CPU", self.jobs))
         self.capacity = cpus if self.address is not None else self.jobs
         self._remote = ray.remote(num_cpus=1, max_retries=0)(run_points)
@@ -298,6 +341,13 @@ class RayBackend:
             self._ray.cancel(reference, force=True)
         if self._started:
             self._ray.shutdown()
+
+    def warm_up(self, recordings: RecordingSet | None = None) -> int:
+        """Start a Ray worker per CPU with its one-off work (:func:`warm_worker`); count them."""
+        warm = self._ray.remote(num_cpus=1, max_retries=0)(warm_worker)
+        return len(set(self._ray.get(
+            [warm.remote(recordings, WARM_HOLD_S) for _ in range(self.capacity)]
+        )))
 
     def submit(self, key: Any, specs: Sequence[ScenarioSpec],
                recordings: RecordingSet | None) -> None:

@@ -1,11 +1,12 @@
 """Threshold search with Optuna: a study in a storage, trials on a backend, resumable.
 
 ``semistatic tune SCENARIO --param mapper.gate=0.05:0.20 --trials 20`` asks Optuna's
-sampler (TPE, random or grid) for parameter values, runs each trial (every seed of it,
-replayed from recordings or re-simulated) on a backend (:mod:`scenarios.tune_run`) and
-tells the study the objectives: the mean over the seeds of each ``--objective`` (several
-make a multi-objective study with a Pareto front). Every trial keeps its full metrics,
-per seed, in the study's user attributes, with the worst case and the spread.
+sampler (TPE, random or grid) for parameter values, runs each trial (every scenario of
+``SCENARIO[,SCENARIO...]`` with every seed, replayed from recordings or re-simulated) on a
+backend (:mod:`scenarios.tune_run`) and tells the study the objectives: the mean over the
+trial's runs of each ``--objective`` (several make a multi-objective study with a Pareto
+front). Every trial keeps its full metrics, per run, in the study's user attributes, with
+the worst case and the spread (robust thresholds: rank by either).
 
 The study lives in an Optuna RDB storage (by default ``DIR/study.db``, SQLite). The
 driver records a heartbeat for every trial it runs; a trial left running by a killed
@@ -97,8 +98,12 @@ class SearchConfig:
     trials: int = 20
     grid_points: int = 5
     sampler_seed: int = 0
+    also: tuple[str, ...] = ()
+    """Further scenarios every trial runs (each with every seed): robust thresholds."""
 
     def __post_init__(self) -> None:
+        if len(set(self.scenarios)) != len(self.scenarios):
+            raise SpecError("scenario", ",".join(self.scenarios), "a scenario twice")
         for name in self.objectives:
             if name not in METRICS:
                 raise SpecError(OBJECTIVE_OPTION, name,
@@ -119,6 +124,11 @@ class SearchConfig:
                 raise SpecError("--trials", "trials",
                                 f"{self.trials} exceeds the grid's {size} points")
 
+    @property
+    def scenarios(self) -> tuple[str, ...]:
+        """Return every scenario a trial runs: ``scenario``, then ``also``."""
+        return (self.scenario, *self.also)
+
     def directions(self) -> list[str]:
         """Return Optuna's direction of each objective."""
         return ["maximize" if METRICS[name].better == "high" else "minimize"
@@ -131,12 +141,18 @@ class SearchConfig:
             "objectives": list(self.objectives), "seeds": self.seeds, "laps": self.laps,
             "overrides": list(self.overrides), "sampler": self.sampler,
             "grid_points": self.grid_points, "sampler_seed": self.sampler_seed,
+            # Only when given, so that the studies of one scenario keep their fingerprint.
+            **({"also": list(self.also)} if self.also else {}),
         }))
 
     def points(self, values: Mapping[str, Any]):
-        """Return the validated sweep points (one per seed) of parameter ``values``."""
-        return sweep_points(self.scenario, {key: (value,) for key, value in values.items()},
-                            seeds=self.seeds, laps=self.laps, overrides=self.overrides)
+        """Return the validated sweep points of ``values``: each scenario with each seed."""
+        return self._points({key: (value,) for key, value in values.items()})
+
+    def _points(self, grids: Mapping[str, Sequence[Any]]):
+        return [point for scenario in self.scenarios
+                for point in sweep_points(scenario, grids, seeds=self.seeds, laps=self.laps,
+                                          overrides=self.overrides)]
 
     def validate(self, recordings: RecordingSet | None = None) -> None:
         """Check every parameter's ends (or choices) against the scenario and recordings.
@@ -148,9 +164,7 @@ class SearchConfig:
             raise SpecError(PARAM_OPTION, "KEY=LOW:HIGH", "nothing to search: give a --param")
         for param in self.params:
             try:
-                points = sweep_points(self.scenario, {param.key: param.endpoints()},
-                                      seeds=self.seeds, laps=self.laps,
-                                      overrides=self.overrides)
+                points = self._points({param.key: param.endpoints()})
             except SpecError as error:
                 if error.file != "--grid":
                     raise
@@ -185,10 +199,11 @@ class SearchConfig:
                 for combination in itertools.product(*values)]
 
     def objective_values(self, metrics: Sequence[Mapping[str, Any] | None]) -> dict[str, Any]:
-        """Return the per-objective mean, worst case and spread over the seeds' metrics.
+        """Return the per-objective mean, worst case and spread over a trial's runs' metrics.
 
-        The optimised value is the mean (for NEES: the mean distance to
-        :data:`~scenarios.tune.NEES_TARGET`). ``None`` values when a seed lacks one.
+        The runs are every scenario with every seed. The optimised value is the mean (for
+        NEES: the mean distance to :data:`~scenarios.tune.NEES_TARGET`). ``None`` values
+        when a run lacks one.
 
         Examples
         --------
@@ -262,13 +277,15 @@ def finished_trials(study: optuna.Study) -> list[optuna.trial.FrozenTrial]:
 
 
 def _tell(study: optuna.Study, trial: optuna.trial.Trial, config: SearchConfig,
-          outcomes: Sequence[tuple[dict | None, str | None]], seeds: Sequence[int]) -> None:
+          outcomes: Sequence[tuple[dict | None, str | None]], seeds: Sequence[int],
+          runs: Sequence[str]) -> None:
     from scenarios.outputs import json_text
 
     metrics = [json.loads(json_text(m)) if m is not None else None for m, _ in outcomes]
     errors = [error for _, error in outcomes]
     objectives = config.objective_values(metrics)
     trial.set_user_attr("seeds", list(seeds))
+    trial.set_user_attr("runs", list(runs))
     trial.set_user_attr("metrics", metrics)
     trial.set_user_attr("errors", errors)
     for key, values in objectives.items():
@@ -297,7 +314,7 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
     run here. ``on_trial(number, label)`` is called as each trial is told.
     """
     distributions = {param.key: param.distribution() for param in config.params}
-    inflight: dict[int, tuple[optuna.trial.Trial, list[int]]] = {}
+    inflight: dict[int, tuple[optuna.trial.Trial, list]] = {}
     ran = 0
     while True:
         optuna.storages.fail_stale_trials(study)
@@ -312,7 +329,7 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
         while free > 0 and len(inflight) < backend.capacity:
             trial = study.ask(distributions)
             points = config.points(trial.params)
-            inflight[trial.number] = (trial, [point.seed for point in points])
+            inflight[trial.number] = (trial, points)
             backend.submit(trial.number, [point.spec for point in points], recordings)
             free -= 1
         for trial, _ in inflight.values():
@@ -322,8 +339,9 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
             time.sleep(POLL_S)  # others' trials: wait for them to finish or go stale
             continue
         for number, outcomes in backend.finished(timeout=POLL_S):
-            trial, seeds = inflight.pop(number)
-            _tell(study, trial, config, outcomes, seeds)
+            trial, points = inflight.pop(number)
+            _tell(study, trial, config, outcomes, [point.seed for point in points],
+                  [point.run for point in points])
             ran += 1
             if on_trial is not None:
                 values = " ".join(f"{key}={value}" for key, value in trial.params.items())

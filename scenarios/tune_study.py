@@ -36,10 +36,28 @@ from scenarios.tune_search import (
 from scenarios.tune_table import write_sweep
 from semistatic.errors import SpecError
 
-__all__ = ["DEFAULT_TRIALS", "STUDY_FILE", "default_storage", "main_search"]
+__all__ = ["DEFAULT_TRIALS", "STUDY_FILE", "default_storage", "main_search", "split_scenarios"]
 
 DEFAULT_TRIALS = 20
 STUDY_FILE = "study.db"
+
+
+def split_scenarios(text: str) -> list[str]:
+    """Return the scenarios of ``SCENARIO[,SCENARIO...]``: every trial runs each of them.
+
+    Examples
+    --------
+    >>> split_scenarios("pal1,sim1"), split_scenarios("my.toml")
+    (['pal1', 'sim1'], ['my.toml'])
+    >>> split_scenarios("pal1,")
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: scenario: pal1,: an empty name; give SCENARIO[,SCENARIO...]
+    """
+    names = [name.strip() for name in text.split(",")]
+    if not all(names):
+        raise SpecError("scenario", text, "an empty name; give SCENARIO[,SCENARIO...]")
+    return names
 
 
 def default_storage(out: Path) -> str:
@@ -56,10 +74,11 @@ def _config(args: argparse.Namespace, recordings: RecordingSet | None) -> Search
     trials = args.trials
     if trials is None:
         trials = grid_size(params, args.grid_points) if args.sampler == "grid" else DEFAULT_TRIALS
+    first, *also = split_scenarios(args.scenario)
     config = SearchConfig(
-        args.scenario, params, objectives=tuple(args.objectives or [args.sort]),
+        first, params, objectives=tuple(args.objectives or [args.sort]),
         seeds=seeds, laps=laps, overrides=tuple(args.overrides), sampler=args.sampler,
-        trials=trials, grid_points=args.grid_points,
+        trials=trials, grid_points=args.grid_points, also=tuple(also),
     )
     config.validate(recordings)
     return config
@@ -76,7 +95,8 @@ def main_search(args: argparse.Namespace) -> int:
         raise SpecError("--backend", "ray", "Ray is not installed: pip install 'semistatic[ray]'")
     recordings = RecordingSet.read(args.recordings) if args.recordings else None
     config = _config(args, recordings)
-    name = args.study or f"tune-{config.points({})[0].spec.name}"
+    name = args.study or "tune-" + "+".join(
+        dict.fromkeys(point.spec.name for point in config.points({})))
     out = args.out if args.out is not None else Path("results") / name
     check_output_dir(out)
     url = args.storage

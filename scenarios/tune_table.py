@@ -45,7 +45,8 @@ def sweep_row(result: PointResult) -> dict[str, Any]:
     (0, 0.1, 2, 0.8, None, '')
     """
     point = result.point
-    row: dict[str, Any] = {"point": point.index, **dict(point.settings), "seed": point.seed}
+    row: dict[str, Any] = {"point": point.index, **dict(point.settings),
+                           "scenario": point.spec.name, "seed": point.seed}
     for name in METRICS:
         row[name] = metric_value(result.metrics, name)
     row["error"] = result.error or ""
@@ -57,11 +58,20 @@ def _mean(values: Sequence[Any]) -> float | None:
     return round(math.fsum(numbers) / len(numbers), MEAN_DIGITS) if numbers else None
 
 
+def _worst_and_spread(values: Sequence[Any], name: str) -> tuple[Any, Any]:
+    numbers = [float(v) for v in values if isinstance(v, int | float) and math.isfinite(v)]
+    if not numbers:
+        return None, None
+    worst = max(numbers, key=METRICS[name].score)
+    return worst, round(max(numbers) - min(numbers), MEAN_DIGITS)
+
+
 def combine_seeds(results: Sequence[PointResult]) -> list[dict[str, Any]]:
     """Return one row per grid combination: each metric's mean over its seeds.
 
-    A row has ``settings`` (the grid values), ``seeds``, ``failed`` (runs that raised) and
-    one entry per :data:`METRICS` column (``None`` where no seed has a value).
+    A row has ``settings`` (the grid values), ``seeds``, ``failed`` (runs that raised),
+    one entry per :data:`METRICS` column (``None`` where no seed has a value), and
+    ``worst`` and ``spread``: each metric's worst seed and its range over the seeds.
 
     Examples
     --------
@@ -85,8 +95,11 @@ def combine_seeds(results: Sequence[PointResult]) -> list[dict[str, Any]]:
             "points": [result.point.index for result in members],
             "failed": sum(result.failed for result in members),
         }
+        row["worst"], row["spread"] = {}, {}
         for name in METRICS:
-            row[name] = _mean([point_row[name] for point_row in point_rows])
+            values = [point_row[name] for point_row in point_rows]
+            row[name] = _mean(values)
+            row["worst"][name], row["spread"][name] = _worst_and_spread(values, name)
         rows.append(row)
     return rows
 
@@ -134,6 +147,12 @@ def _sweep_summary(results: Sequence[PointResult], sort: str) -> dict[str, Any]:
     best = ranking[0] if ranking and ranking[0][sort] is not None else None
     if best is not None and best["failed"]:
         best = None
+    # Robust choice: the combination whose worst seed is best (rank on the worst values).
+    by_worst = rank([{sort: row["worst"][sort], "failed": row["failed"], "row": row}
+                     for row in ranking], sort)
+    best_worst = by_worst[0]["row"] if by_worst and by_worst[0][sort] is not None else None
+    if best_worst is not None and best_worst["failed"]:
+        best_worst = None
     return {
         "scenario": first.spec.name,
         "source": first.spec.source,
@@ -150,6 +169,7 @@ def _sweep_summary(results: Sequence[PointResult], sort: str) -> dict[str, Any]:
         ],
         "ranking": ranking,
         "best": best,
+        "best_worst_case": best_worst,
     }
 
 
@@ -267,15 +287,19 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
     sort = summary["sort"]
     ranking = summary["ranking"]
     keys = list(summary["grid"])
-    header = ["rank", *keys, "seeds", *TABLE_COLUMNS.values()]
+    several = len(summary["seeds"]) > 1  # then the worst seed and the spread of --sort
+    header = ["rank", *keys, "seeds", *TABLE_COLUMNS.values(),
+              *(["worst", "spread"] if several else [])]
     lines = [[str(rank_number), *(display_value(row["settings"][key]) for key in keys),
               str(len(row["seeds"])) + (f" ({row['failed']} failed)" if row["failed"] else ""),
-              *(_cell(row[name]) for name in TABLE_COLUMNS)]
+              *(_cell(row[name]) for name in TABLE_COLUMNS),
+              *([_cell(row["worst"][sort]), _cell(row["spread"][sort])] if several else [])]
              for rank_number, row in enumerate(ranking[:limit], start=1)]
     widths = [max(len(cell) for cell in column) for column in zip(header, *lines, strict=True)]
     text = [
         f"{summary['scenario']}: {len(summary['points'])} runs of {summary['laps']} laps, "
-        f"ranked by {METRICS[sort].label} (means over seeds)",
+        f"ranked by {METRICS[sort].label} (means over seeds"
+        + (f"; worst and spread: of {METRICS[sort].label} over the seeds)" if several else ")"),
         "  ".join(cell.rjust(width) for cell, width in zip(header, widths, strict=True)),
     ]
     text += ["  ".join(cell.rjust(width) for cell, width in zip(line, widths, strict=True))
@@ -295,6 +319,10 @@ def format_ranking(summary: Mapping[str, Any], out: str | Path, *,
             f"best by {METRICS[sort].label}: {settings or 'the scenario as is'} "
             f"({_cell(best[sort])}, {'mean of ' * (seeds > 1)}{seeds} seed{'s' * (seeds > 1)})"
         )
+    robust = summary.get("best_worst_case")
+    if several and robust is not None:
+        text.append(f"best worst case: {settings_text(robust['settings']) or 'the scenario as is'}"
+                    f" ({_cell(robust['worst'][sort])} at worst, mean {_cell(robust[sort])})")
     written = ["sweep.csv", "sweep.json"] + (["figures/sweep.png"] if figures else [])
     text.append(f"results in {out}/ ({', '.join(written)})")
     return "\n".join(text)

@@ -210,6 +210,26 @@ def test_seed_means_ignore_missing_values_and_count_failures():
     assert [row["settings"]["mapper.gate"] for row in rank([first, second])] == [0.1, 0.2]
     assert sweep_row(results[4])["error"] == "RuntimeError: lost"
     assert sweep_row(results[4])["f1"] is None
+    # Worst seed and spread, by hand: Table 1 of gate 0.1 is 2.0, -, 4.0; F1 0.5, 1.0, 0.0.
+    assert first["worst"]["table1_mean_avg_cm"] == 4.0
+    assert first["spread"]["table1_mean_avg_cm"] == 2.0
+    assert first["worst"]["f1"] == 0.0  # higher is better: the worst is the lowest
+    assert first["spread"]["f1"] == 1.0
+    assert second["worst"]["table1_mean_avg_cm"] == 3.0  # the failed seed has no value
+
+
+def test_the_best_worst_case_can_differ_from_the_best_mean(tmp_path):
+    points = sweep_points("sim1", {"mapper.gate": (0.1, 0.2)}, seeds=(0, 1))
+    values = (1.0, 5.0, 3.2, 3.2)  # gate 0.1: mean 3.0, worst 5.0; gate 0.2: 3.2 and 3.2
+    results = [PointResult(point, fake_metrics(value, 1.0))
+               for point, value in zip(points, values, strict=True)]
+    summary = write_sweep(results, tmp_path / "sweep", figures=False)
+    assert summary["best"]["settings"] == {"mapper.gate": 0.1}
+    assert summary["best_worst_case"]["settings"] == {"mapper.gate": 0.2}
+    text = format_ranking(summary, tmp_path / "sweep", figures=False)
+    assert text.splitlines()[1].split()[-2:] == ["worst", "spread"]
+    assert text.splitlines()[2].split()[-2:] == ["5", "4"]
+    assert "best worst case: mapper.gate=0.2 (3.2 at worst, mean 3.2)" in text
 
 
 def test_written_sweep_has_one_row_per_point_and_ranks_seed_means(tmp_path):
@@ -226,7 +246,7 @@ def test_written_sweep_has_one_row_per_point_and_ranks_seed_means(tmp_path):
     assert [row["seed"] for row in rows] == ["0", "1", "0", "1"]
     assert rows[1]["table1_mean_avg_cm"] == ""
     assert rows[3]["error"] == "RuntimeError: robot lost"
-    assert list(rows[0]) == ["point", restriction, "seed", *METRICS, "error"]
+    assert list(rows[0]) == ["point", restriction, "scenario", "seed", *METRICS, "error"]
     data = json.loads((out / "sweep.json").read_text())
     assert data["grid"] == {restriction: ["vertex", "projection"]}
     assert data["seeds"] == [0, 1]

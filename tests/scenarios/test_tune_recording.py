@@ -122,6 +122,27 @@ def test_tune_refuses_another_scenario_and_other_versions(recorded, tmp_path, ca
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.parametrize(
+    ("scenarios", "options", "fragments"),
+    [
+        ("pal1,sim1", ["--param", "mapper.gate=0.1:0.2"],
+         ["--recording: scenario:", "'pal1', not 'sim1'", "record sim1"]),
+        ("pal1,pal1", ["--param", "mapper.gate=0.1:0.2"], ["scenario: pal1,pal1:", "twice"]),
+        ("pal1,", ["--param", "mapper.gate=0.1:0.2"], ["scenario: pal1,:", "empty name"]),
+        ("pal1,sim1", ["--grid", "mapper.gate=0.1"], ["scenario: pal1,sim1:", "--param"]),
+    ],
+)
+def test_several_scenarios_need_a_search_and_a_recording_each(recorded, tmp_path, capsys,
+                                                               scenarios, options, fragments):
+    path, _, _ = recorded
+    out = tmp_path / "tune"
+    status, _, err = run_cli(capsys, "tune", scenarios, "--recording", path, *options,
+                             "--out", out)
+    assert status == 2
+    assert_one_error_line(err, *fragments)
+    assert not out.exists()
+
+
 def test_tune_from_a_recording_ranks_replayed_points(recorded, tmp_path, capsys):
     path, metrics, _ = recorded
     out = tmp_path / "tune"

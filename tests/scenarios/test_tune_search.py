@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import signal
 import sqlite3
 import subprocess
@@ -218,3 +219,53 @@ def test_ray_tasks_give_the_pool_results(tiny):
                          for key, outcomes in done}
     assert results["ray"] == results["pool"]
     assert TIMING_COLUMNS == ("wall_time_s",)
+
+
+# ------------------------------------------------------------------ robust thresholds
+@pytest.mark.slow
+def test_a_trial_spans_every_recorded_scenario_and_ranks_by_mean_and_worst_case(
+    tmp_path, capsys
+):
+    from scenarios.outputs import summarize
+    from scenarios.recording import ScanRecorder
+    from scenarios.runner import run_scenario
+    from tests.scenarios.tiny_world import TINY_SCENARIO
+
+    first = write_tiny(tmp_path)
+    second = tmp_path / "noisy.toml"  # the same world and seed, three times the range noise
+    second.write_text(TINY_SCENARIO + "\n[noise]\nrange = 3.0\n")
+    recordings = []
+    for scenario in (first, second):
+        spec = load_scenario(scenario, overrides=["laps=1"])
+        recorder = ScanRecorder()
+        metrics = summarize(run_scenario(spec, observers=(recorder,)))
+        recordings += ["--recording", tmp_path / f"rec-{spec.name}"]
+        recorder.write(recordings[-1], spec, metrics)
+    out = tmp_path / "out"
+    status, stdout, _ = run_cli(
+        capsys, "tune", f"{first},{second}", *recordings, "--param", "mapper.epsilon=0.01:0.06",
+        "--objective", "rmse_xy_m", "--sampler", "random",
+        "--trials", "3", "--no-figures", "--out", out,
+    )
+    assert status == 0, stdout
+    study = json.loads((out / "study.json").read_text())
+    sweep = json.loads((out / "sweep.json").read_text())
+    # Every trial ran both scenarios (replayed: the recorded seed 3 of each).
+    assert [point["scenario"] for point in sweep["points"]] == ["tiny", "noisy"] * 3
+    assert all(point["metrics"]["replayed_from"] for point in sweep["points"])
+    for row in study["trials"]:
+        assert row["runs"] == ["tiny seed=3", "noisy seed=3"]
+        assert row["seeds"] == [3, 3]
+    # Mean, worst case and spread over the two runs, from the runs' own metrics.
+    values = [point["rmse_xy_m"] for point in sweep["points"]]
+    pairs = [values[k:k + 2] for k in range(0, len(values), 2)]
+    for row, (a, b) in zip(study["trials"], pairs, strict=True):
+        assert a != b  # the noisier scenario localises differently
+        assert row["mean"]["rmse_xy_m"] == pytest.approx((a + b) / 2, abs=1e-6)  # 6 decimals
+        assert row["worst"]["rmse_xy_m"] == max(a, b)
+        assert row["spread"]["rmse_xy_m"] == pytest.approx(abs(a - b), abs=1e-6)
+    worst = [row["worst"]["rmse_xy_m"] for row in study["trials"]]
+    ranked = {row["trial"]: row["worst"]["rmse_xy_m"] for row in study["trials"]}
+    assert [ranked[n] for n in study["ranking_by_worst"]] == sorted(worst)
+    assert re.search(r"rmse_xy_m mean +worst +spread", stdout), stdout
+    assert "mean over 2 run(s): tiny seed=3, noisy seed=3" in stdout
