@@ -21,7 +21,8 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from scenarios.layout import check_scenario_layout
+from scenarios.layout import check_scenario_layout, scenario_world
+from scenarios.routes import check_vehicles
 from scenarios.spec import ScenarioSpec
 from semistatic.errors import SpecError, join_key
 from semistatic.params import MapperParams
@@ -163,6 +164,7 @@ def _apply_overrides(
     settable = {name: hint for name, hint in _known_keys(ScenarioSpec).items()}
     settable.pop("source")
     settable.pop("moves")
+    settable.pop("vehicles")
     keys = []
     for text in overrides:
         path, value = parse_override(text)
@@ -287,6 +289,8 @@ def scenario_from_toml(
     if check_layout:
         with _blame_overrides(file, keys):
             check_scenario_layout(spec, moves=file_spec.moves)
+            if spec.vehicles:
+                check_vehicles(spec, scenario_world(spec))
     return spec
 
 

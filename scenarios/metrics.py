@@ -25,9 +25,11 @@ __all__ = [
     "MATCH_DISTANCE",
     "MIN_TABLE1_SAMPLES",
     "PERSON_DISTANCE",
+    "VEHICLE_DISTANCE",
     "clip_to_area",
     "detection_scores",
     "ekf_correction_metrics",
+    "false_objects_near",
     "localization_metrics",
     "match_polylines_to_boxes",
     "score_lap",
@@ -39,6 +41,9 @@ MATCH_DISTANCE = 0.10
 
 PERSON_DISTANCE = 0.35
 """A false polyline this close (m) to where a person walked is counted as made of a person."""
+
+VEHICLE_DISTANCE = 0.1
+"""A false polyline this close (m) to where another vehicle stood counts as made of it."""
 
 MIN_TABLE1_SAMPLES = 5
 """Reference polylines associated fewer times than this are left out of Table 1."""
@@ -155,13 +160,7 @@ def score_lap(
     )
     tp = fp = fn = from_people = 0
     for segment in segments:
-        area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
-        lines = [
-            clipped
-            for line in local_maps[segment.name].world_polylines().values()
-            if len(clipped := clip_to_area(line.points, area))
-        ]
-        matches = match_polylines_to_boxes(lines, truth) if names else np.zeros((len(lines), 0))
+        lines, matches = _judged_lines(local_maps, segment, truth)
         on_box = matches.any(axis=1)
         tp += int(on_box.sum())
         fp += int((~on_box).sum())
@@ -170,11 +169,66 @@ def score_lap(
         ]
         fn += sum(1 for j in expected if not matches[:, j].any())
         if track is not None:
-            for line, matched in zip(lines, on_box, strict=True):
-                geometry = shapely.LineString(line) if len(line) > 1 else shapely.Point(line[0])
-                if not matched and shapely.distance(geometry, track) <= PERSON_DISTANCE:
-                    from_people += 1
+            from_people += _count_near(
+                [line for line, matched in zip(lines, on_box, strict=True) if not matched],
+                track, PERSON_DISTANCE)
     return detection_scores(tp, fp, fn), from_people
+
+
+def _judged_lines(local_maps: Mapping[str, Any], segment: Any,
+                  truth: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], np.ndarray]:
+    """Return a segment's map polylines clipped to its area and which box each lies on."""
+    area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
+    lines = [
+        clipped
+        for line in local_maps[segment.name].world_polylines().values()
+        if len(clipped := clip_to_area(line.points, area))
+    ]
+    matches = match_polylines_to_boxes(lines, truth) if truth else np.zeros((len(lines), 0))
+    return lines, matches
+
+
+def _count_near(lines: Sequence[np.ndarray], geometry: shapely.Geometry, distance: float) -> int:
+    count = 0
+    for line in lines:
+        shape = shapely.LineString(line) if len(line) > 1 else shapely.Point(line[0])
+        count += int(shapely.distance(shape, geometry) <= distance)
+    return count
+
+
+def false_objects_near(
+    local_maps: Mapping[str, Any],
+    segments: Sequence[Any],
+    truth: Mapping[str, np.ndarray],
+    area: shapely.Geometry,
+    distance: float = VEHICLE_DISTANCE,
+) -> int:
+    """Return how many false map polylines (on no box) lie within ``distance`` of ``area``.
+
+    ``area`` is e.g. the union of the footprints other vehicles covered during a lap: a
+    false polyline there is counted as made of a vehicle (as :func:`score_lap` counts
+    those where a person walked).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> from semistatic.local_map import LocalMap
+    >>> local_map = LocalMap()
+    >>> _ = local_map.add([[1.0, 0.0], [1.0, 1.0]])   # a vehicle's flank
+    >>> segment = SimpleNamespace(name="s", safety_area_world=shapely.box(-5, -5, 5, 5))
+    >>> vehicle = shapely.box(1.05, -0.2, 2.0, 1.2)
+    >>> false_objects_near({"s": local_map}, [segment], {}, vehicle)
+    1
+    >>> false_objects_near({"s": local_map}, [segment], {}, shapely.box(3.0, 3.0, 4.0, 4.0))
+    0
+    """
+    count = 0
+    for segment in segments:
+        lines, matches = _judged_lines(local_maps, segment, truth)
+        on_box = matches.any(axis=1)
+        count += _count_near([line for line, matched in zip(lines, on_box, strict=True)
+                              if not matched], area, distance)
+    return count
 
 
 def table1_cm(

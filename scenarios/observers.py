@@ -39,7 +39,7 @@ from collections.abc import Callable
 import numpy as np
 import shapely
 
-from scenarios.metrics import match_polylines_to_boxes, score_lap
+from scenarios.metrics import false_objects_near, match_polylines_to_boxes, score_lap
 from scenarios.records import LapLog, ScanRecord
 from scenarios.spec import ScenarioSpec
 from semistatic.frames import transform_points
@@ -97,11 +97,14 @@ class GroundTruthScoring:
     """Score each lap's local maps against the simulator's ground truth.
 
     Per lap: detection precision/recall (:func:`scenarios.metrics.score_lap`), objects
-    made from people (their positions at every safety scan), and for each box moved or
+    made from people (their positions at every safety scan), in a fleet objects made from
+    other vehicles (their true footprints at every safety scan, from the bench's
+    ``other_vehicle_outlines()``), and for each box moved or
     added before the lap the detection latency: safety scans from the first that sees it
     (``OBSERVED_READINGS`` readings within ``OBSERVED_DISTANCE`` of its true outline) to
     the first with a map polyline on it. Results go into the lap log (``detection``,
-    ``false_objects_from_people``, ``latencies``) and the run log's ``truth_after_lap``.
+    ``false_objects_from_people``, ``false_objects_from_vehicles``, ``latencies``) and
+    the run log's ``truth_after_lap``.
     The truth is read again whenever a box is moved, added or removed.
 
     Examples
@@ -119,6 +122,7 @@ class GroundTruthScoring:
         self._first_seen: dict[str, int] = {}
         self._detected_at: dict[str, int] = {}
         self._person_tracks: list[np.ndarray] = []
+        self._vehicle_outlines: list[np.ndarray] = []
 
     def _current_truth(self, bench) -> dict[str, np.ndarray]:
         if self._revision != bench.layout_revision:
@@ -132,10 +136,14 @@ class GroundTruthScoring:
         self._watch = moved_boxes(bench.spec, lap)
         self._first_seen, self._detected_at = {}, {}
         self._person_tracks = []
+        self._vehicle_outlines = []
 
     def on_scan(self, bench, record: ScanRecord) -> None:
         """Note where people stand and whether a watched box was seen and mapped."""
         self._person_tracks.extend(p for p in bench.person_positions.values() if p is not None)
+        others = getattr(bench, "other_vehicle_outlines", None)
+        if others is not None:
+            self._vehicle_outlines.extend(others())
         if not self._watch:
             return
         truth = self._current_truth(bench)
@@ -180,6 +188,11 @@ class GroundTruthScoring:
         lap_log.detection, lap_log.false_objects_from_people = score_lap(
             bench.local_maps, bench.segments, truth, self._person_tracks
         )
+        if hasattr(bench, "other_vehicle_outlines"):
+            area = shapely.union_all(shapely.polygons(self._vehicle_outlines)) \
+                if self._vehicle_outlines else shapely.Polygon()
+            lap_log.false_objects_from_vehicles = false_objects_near(
+                bench.local_maps, bench.segments, truth, area)
         bench.log.truth_after_lap.append(truth)
 
 
