@@ -70,7 +70,7 @@ def bundled_scenarios() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_scenarios()
-    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse')
+    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 
@@ -103,7 +103,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
-and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse
+and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse, \
+warehouse_fleet
     """
     text = str(name_or_path)
     names = bundled_scenarios()

@@ -11,7 +11,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -200,34 +200,46 @@ def false_objects_near(
     local_maps: Mapping[str, Any],
     segments: Sequence[Any],
     truth: Mapping[str, np.ndarray],
-    area: shapely.Geometry,
+    area_at: Callable[[float], shapely.Geometry],
     distance: float = VEHICLE_DISTANCE,
 ) -> int:
-    """Return how many false map polylines (on no box) lie within ``distance`` of ``area``.
+    """Return how many false map polylines (on no box) began within ``distance`` of an area.
 
-    ``area`` is e.g. the union of the footprints other vehicles covered during a lap: a
-    false polyline there is counted as made of a vehicle (as :func:`score_lap` counts
-    those where a person walked).
+    ``area_at(t)`` is e.g. where the fleet's vehicles stood at time ``t``: a false
+    polyline first seen at ``t`` within ``distance`` of ``area_at(t)`` is counted as made
+    of a vehicle (as :func:`score_lap` counts those where a person walked). Asking at the
+    polyline's first sighting keeps a vehicle that later drove past an old false
+    polyline from taking the blame.
 
     Examples
     --------
     >>> from types import SimpleNamespace
     >>> from semistatic.local_map import LocalMap
     >>> local_map = LocalMap()
-    >>> _ = local_map.add([[1.0, 0.0], [1.0, 1.0]])   # a vehicle's flank
+    >>> local_map.add([[1.0, 0.0], [1.0, 1.0]], stamp=4.0)   # a vehicle's flank
+    0
     >>> segment = SimpleNamespace(name="s", safety_area_world=shapely.box(-5, -5, 5, 5))
-    >>> vehicle = shapely.box(1.05, -0.2, 2.0, 1.2)
-    >>> false_objects_near({"s": local_map}, [segment], {}, vehicle)
+    >>> def vehicle_at(t):
+    ...     return shapely.box(1.05, -0.2, 2.0, 1.2) if t < 5.0 else shapely.box(3, 3, 4, 4)
+    >>> false_objects_near({"s": local_map}, [segment], {}, vehicle_at)
     1
-    >>> false_objects_near({"s": local_map}, [segment], {}, shapely.box(3.0, 3.0, 4.0, 4.0))
+    >>> false_objects_near({"s": local_map}, [segment], {}, lambda t: shapely.Polygon())
     0
     """
     count = 0
     for segment in segments:
-        lines, matches = _judged_lines(local_maps, segment, truth)
-        on_box = matches.any(axis=1)
-        count += _count_near([line for line, matched in zip(lines, on_box, strict=True)
-                              if not matched], area, distance)
+        local_map = local_maps[segment.name]
+        ids, lines = [], []
+        area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
+        for map_id, line in local_map.world_polylines().items():
+            clipped = clip_to_area(line.points, area)
+            if len(clipped):
+                ids.append(map_id)
+                lines.append(clipped)
+        matches = match_polylines_to_boxes(lines, truth) if truth else np.zeros((len(lines), 0))
+        for map_id, line, matched in zip(ids, lines, matches.any(axis=1), strict=True):
+            if not matched:
+                count += _count_near([line], area_at(local_map[map_id].first_seen), distance)
     return count
 
 

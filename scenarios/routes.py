@@ -91,11 +91,11 @@ def check_vehicles(spec: ScenarioSpec, world: WorldSpec) -> None:
     >>> from scenarios.layout import scenario_world
     >>> spec = load_scenario("warehouse_fleet")
     >>> check_vehicles(spec, scenario_world(spec))
-    >>> bad = dataclasses.replace(spec, vehicles=(VehicleSpec("a", start_segment="east"),))
+    >>> bad = dataclasses.replace(spec, vehicles=(VehicleSpec("a", start_segment="eats"),))
     >>> check_vehicles(bad, scenario_world(spec))  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    semistatic.errors.SpecError: ...: vehicles[0].start_segment: no segment 'east' in ...
+    semistatic.errors.SpecError: ...: vehicles[0].start_segment: no segment 'eats' in ...
     """
     names = [segment.name for segment in world.path.segments]
     for index, vehicle in enumerate(spec.vehicles):

@@ -269,15 +269,15 @@ class Vehicle:
         """Return the path segment the vehicle is on (by the follower's progress)."""
         return self.segments[segment_index(self.segments, self.follower.progress)]
 
-    def other_vehicle_outlines(self) -> list[np.ndarray]:
-        """Return the true ``(N, 2)`` footprints of the fleet's other vehicles on the route.
+    def vehicle_outlines(self) -> list[np.ndarray]:
+        """Return the true ``(N, 2)`` footprints of the fleet's vehicles on the route.
 
-        For scoring only (ground truth); the mapper uses the poses they report.
+        For scoring only (ground truth); the mapper uses the poses vehicles report.
         """
         return [
             transform_points(other.body.true_pose(), np.asarray(other.robot.footprint))
             for other in self.bench.fleet
-            if other is not self and not other.done
+            if not other.done
         ]
 
     # ------------------------------------------------------------------ observers
