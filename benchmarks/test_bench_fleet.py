@@ -21,7 +21,7 @@ import pytest
 from scenarios import Testbench
 from scenarios.load import load_scenario
 
-SIM_SECONDS = 30.0
+SIM_SECONDS = 20.0
 ROUNDS = 3
 
 

@@ -373,7 +373,7 @@ class Testbench:
         >>> with Testbench("warehouse_fleet") as bench:
         ...     bench.reset()
         ...     [name for name in bench.vehicles], bench.vehicles["lgv2"].segment.name
-        (['lgv1', 'lgv2', 'lgv3'], 'west')
+        (['lgv1', 'lgv2', 'lgv3'], 'north_west')
         >>> bool((bench.true_pose == bench.vehicles["lgv1"].true_pose).all())
         True
         """

@@ -69,7 +69,7 @@ def test_every_vehicle_stops_for_a_person_and_for_another_vehicle():
     spec = load_scenario("warehouse_fleet", overrides=["laps=1"])
     people = (
         stand_then_leave("ann", (12.6, 2.8), (12.6, 4.1)),   # ahead of lgv1, south aisle
-        stand_then_leave("bob", (4.3, 16.9), (2.6, 16.9)),   # ahead of lgv2, west end
+        stand_then_leave("bob", (17.4, 22.2), (17.4, 23.5)),  # ahead of lgv2, north aisle
         stand_then_leave("cem", (35.7, 8.1), (37.4, 8.1)),   # ahead of lgv3, east end
     )
     world = dataclasses.replace(scenario_world(spec), people=people)
