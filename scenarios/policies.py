@@ -197,6 +197,7 @@ class AdaptivePolicy:
 
         Examples
         --------
+        >>> import dataclasses
         >>> policy = AdaptivePolicy()
         >>> shared = LocalMap()
         >>> _ = shared.add([[1.0, -1.0], [1.0, 1.0]])

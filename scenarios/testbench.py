@@ -227,8 +227,8 @@ class Testbench:
         --------
         >>> with Testbench("pal1") as bench:
         ...     bench.reset()
-        ...     bench.segment_key("niches")
-        1
+        ...     [bench.segment_key(segment.name) for segment in bench.segments]
+        [0, 1, 2]
         """
         return self._segment_keys[name]
 
@@ -372,10 +372,10 @@ class Testbench:
         --------
         >>> with Testbench("warehouse_fleet") as bench:
         ...     bench.reset()
-        ...     [name for name in bench.vehicles], bench.vehicles["lgv2"].segment.name
-        (['lgv1', 'lgv2', 'lgv3'], 'north_west')
-        >>> bool((bench.true_pose == bench.vehicles["lgv1"].true_pose).all())
-        True
+        ...     names = [name for name in bench.vehicles]
+        ...     same = bool((bench.true_pose == bench.vehicles["lgv1"].true_pose).all())
+        ...     names, bench.vehicles["lgv2"].segment.name, same
+        (['lgv1', 'lgv2', 'lgv3'], 'north_west', True)
         """
         return self.fleet[0].true_pose
 
