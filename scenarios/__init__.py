@@ -4,7 +4,7 @@ Examples
 --------
 >>> from scenarios import bundled_scenarios, load_scenario
 >>> bundled_scenarios()
-('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse')
+('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet')
 >>> load_scenario("pal3b").people
 ('walker',)
 """

@@ -78,6 +78,11 @@ def _parser() -> argparse.ArgumentParser:
         "--compare", action="store_true",
         help="also run the other field policy on the same seed and compare lap times",
     )
+    run.add_argument(
+        "--compare-sharing", action="store_true",
+        help="also run with sharing off on the same seed and compare every vehicle's lap "
+             "times (metrics.json sharing_comparison, figures/lap_times_sharing.png)",
+    )
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     run.add_argument(
         "--bag", type=Path, metavar="DIR",
@@ -226,7 +231,16 @@ def _run(args: argparse.Namespace) -> int:
         with sim_progress(total, f"{spec.name} ({other})", spec.laps) as bar:
             other_log = run_scenario(other_spec, progress=bar)
         comparison = summarize(other_log)
-    metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison)
+    sharing_off = None
+    if args.compare_sharing:
+        if not spec.sharing:
+            raise InputError(f"--compare-sharing: {spec.name} does not share segment maps "
+                             "(sharing = false); add --set sharing=true")
+        off_spec = dataclasses.replace(spec, sharing=False)
+        with sim_progress(total, f"{spec.name} (sharing off)", spec.laps) as bar:
+            sharing_off = summarize(run_scenario(off_spec, progress=bar))
+    metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison,
+                            sharing_off=sharing_off)
     summary = _run_summary(metrics, out)
     if scan_recorder is not None:
         scan_recorder.write(args.record, spec, metrics)
@@ -281,6 +295,20 @@ def _run_summary(metrics: dict, out: Path) -> str:
         f"  safety: {safety['collisions']} collisions, {safety['stops']} stops, "
         f"{safety['slowdowns']} slowdowns, {safety['total_time_s']:.1f} s over all laps",
     ]
+    for name, vehicle in metrics.get("vehicles", {}).items():
+        scores, laps = vehicle["detection"], vehicle["safety"]
+        table = vehicle["table1_cm"]["mean"]["avg"]
+        lines.append(
+            f"  {name}: F1 {scores['f1']:.3f}, Table 1 mean {table} cm, "
+            f"{laps['collisions']} collisions, {laps['stops']} stops, lap times "
+            f"{', '.join(f'{t:.1f}' for t in laps['lap_time_s'])} s, objects from vehicles "
+            f"{scores.get('false_objects_from_vehicles', 0)}"
+        )
+    for name, change in metrics.get("sharing_comparison", {}).items():
+        lines.append(
+            f"  {name}: sharing saves "
+            f"{', '.join(f'{p:+.1f}%' for p in change['saved_percent'])} per lap"
+        )
     if "policy_comparison" in metrics:
         saved = metrics["policy_comparison"]
         lines.append(

@@ -21,7 +21,8 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from scenarios.layout import check_scenario_layout
+from scenarios.layout import check_scenario_layout, scenario_world
+from scenarios.routes import check_vehicles
 from scenarios.spec import ScenarioSpec
 from semistatic.errors import SpecError, join_key
 from semistatic.params import MapperParams
@@ -69,7 +70,7 @@ def bundled_scenarios() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_scenarios()
-    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse')
+    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 
@@ -102,7 +103,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
-and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse
+and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse, \
+warehouse_fleet
     """
     text = str(name_or_path)
     names = bundled_scenarios()
@@ -163,6 +165,7 @@ def _apply_overrides(
     settable = {name: hint for name, hint in _known_keys(ScenarioSpec).items()}
     settable.pop("source")
     settable.pop("moves")
+    settable.pop("vehicles")
     keys = []
     for text in overrides:
         path, value = parse_override(text)
@@ -287,6 +290,8 @@ def scenario_from_toml(
     if check_layout:
         with _blame_overrides(file, keys):
             check_scenario_layout(spec, moves=file_spec.moves)
+            if spec.vehicles:
+                check_vehicles(spec, scenario_world(spec))
     return spec
 
 

@@ -11,7 +11,7 @@ Examples
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,9 +25,11 @@ __all__ = [
     "MATCH_DISTANCE",
     "MIN_TABLE1_SAMPLES",
     "PERSON_DISTANCE",
+    "VEHICLE_DISTANCE",
     "clip_to_area",
     "detection_scores",
     "ekf_correction_metrics",
+    "false_objects_near",
     "localization_metrics",
     "match_polylines_to_boxes",
     "score_lap",
@@ -39,6 +41,9 @@ MATCH_DISTANCE = 0.10
 
 PERSON_DISTANCE = 0.35
 """A false polyline this close (m) to where a person walked is counted as made of a person."""
+
+VEHICLE_DISTANCE = 0.1
+"""A false polyline this close (m) to where another vehicle stood counts as made of it."""
 
 MIN_TABLE1_SAMPLES = 5
 """Reference polylines associated fewer times than this are left out of Table 1."""
@@ -155,13 +160,7 @@ def score_lap(
     )
     tp = fp = fn = from_people = 0
     for segment in segments:
-        area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
-        lines = [
-            clipped
-            for line in local_maps[segment.name].world_polylines().values()
-            if len(clipped := clip_to_area(line.points, area))
-        ]
-        matches = match_polylines_to_boxes(lines, truth) if names else np.zeros((len(lines), 0))
+        lines, matches = _judged_lines(local_maps, segment, truth)
         on_box = matches.any(axis=1)
         tp += int(on_box.sum())
         fp += int((~on_box).sum())
@@ -170,11 +169,78 @@ def score_lap(
         ]
         fn += sum(1 for j in expected if not matches[:, j].any())
         if track is not None:
-            for line, matched in zip(lines, on_box, strict=True):
-                geometry = shapely.LineString(line) if len(line) > 1 else shapely.Point(line[0])
-                if not matched and shapely.distance(geometry, track) <= PERSON_DISTANCE:
-                    from_people += 1
+            from_people += _count_near(
+                [line for line, matched in zip(lines, on_box, strict=True) if not matched],
+                track, PERSON_DISTANCE)
     return detection_scores(tp, fp, fn), from_people
+
+
+def _judged_lines(local_maps: Mapping[str, Any], segment: Any,
+                  truth: Mapping[str, np.ndarray]) -> tuple[list[np.ndarray], np.ndarray]:
+    """Return a segment's map polylines clipped to its area and which box each lies on."""
+    area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
+    lines = [
+        clipped
+        for line in local_maps[segment.name].world_polylines().values()
+        if len(clipped := clip_to_area(line.points, area))
+    ]
+    matches = match_polylines_to_boxes(lines, truth) if truth else np.zeros((len(lines), 0))
+    return lines, matches
+
+
+def _count_near(lines: Sequence[np.ndarray], geometry: shapely.Geometry, distance: float) -> int:
+    count = 0
+    for line in lines:
+        shape = shapely.LineString(line) if len(line) > 1 else shapely.Point(line[0])
+        count += int(shapely.distance(shape, geometry) <= distance)
+    return count
+
+
+def false_objects_near(
+    local_maps: Mapping[str, Any],
+    segments: Sequence[Any],
+    truth: Mapping[str, np.ndarray],
+    area_at: Callable[[float], shapely.Geometry],
+    distance: float = VEHICLE_DISTANCE,
+) -> int:
+    """Return how many false map polylines (on no box) began within ``distance`` of an area.
+
+    ``area_at(t)`` is e.g. where the fleet's vehicles stood at time ``t``: a false
+    polyline first seen at ``t`` within ``distance`` of ``area_at(t)`` is counted as made
+    of a vehicle (as :func:`score_lap` counts those where a person walked). Asking at the
+    polyline's first sighting keeps a vehicle that later drove past an old false
+    polyline from taking the blame.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> from semistatic.local_map import LocalMap
+    >>> local_map = LocalMap()
+    >>> local_map.add([[1.0, 0.0], [1.0, 1.0]], stamp=4.0)   # a vehicle's flank
+    0
+    >>> segment = SimpleNamespace(name="s", safety_area_world=shapely.box(-5, -5, 5, 5))
+    >>> def vehicle_at(t):
+    ...     return shapely.box(1.05, -0.2, 2.0, 1.2) if t < 5.0 else shapely.box(3, 3, 4, 4)
+    >>> false_objects_near({"s": local_map}, [segment], {}, vehicle_at)
+    1
+    >>> false_objects_near({"s": local_map}, [segment], {}, lambda t: shapely.Polygon())
+    0
+    """
+    count = 0
+    for segment in segments:
+        local_map = local_maps[segment.name]
+        ids, lines = [], []
+        area = shapely.buffer(segment.safety_area_world, AREA_MARGIN)
+        for map_id, line in local_map.world_polylines().items():
+            clipped = clip_to_area(line.points, area)
+            if len(clipped):
+                ids.append(map_id)
+                lines.append(clipped)
+        matches = match_polylines_to_boxes(lines, truth) if truth else np.zeros((len(lines), 0))
+        for map_id, line, matched in zip(ids, lines, matches.any(axis=1), strict=True):
+            if not matched:
+                count += _count_near([line], area_at(local_map[map_id].first_seen), distance)
+    return count
 
 
 def table1_cm(

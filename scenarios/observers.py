@@ -39,7 +39,7 @@ from collections.abc import Callable
 import numpy as np
 import shapely
 
-from scenarios.metrics import match_polylines_to_boxes, score_lap
+from scenarios.metrics import false_objects_near, match_polylines_to_boxes, score_lap
 from scenarios.records import LapLog, ScanRecord
 from scenarios.spec import ScenarioSpec
 from semistatic.frames import transform_points
@@ -97,11 +97,14 @@ class GroundTruthScoring:
     """Score each lap's local maps against the simulator's ground truth.
 
     Per lap: detection precision/recall (:func:`scenarios.metrics.score_lap`), objects
-    made from people (their positions at every safety scan), and for each box moved or
+    made from people (their positions at every safety scan), in a fleet objects made from
+    vehicles (false polylines first seen where a vehicle's true footprint stood, from the
+    bench's ``vehicle_outlines()`` at every safety scan), and for each box moved or
     added before the lap the detection latency: safety scans from the first that sees it
     (``OBSERVED_READINGS`` readings within ``OBSERVED_DISTANCE`` of its true outline) to
     the first with a map polyline on it. Results go into the lap log (``detection``,
-    ``false_objects_from_people``, ``latencies``) and the run log's ``truth_after_lap``.
+    ``false_objects_from_people``, ``false_objects_from_vehicles``, ``latencies``) and
+    the run log's ``truth_after_lap``.
     The truth is read again whenever a box is moved, added or removed.
 
     Examples
@@ -119,6 +122,7 @@ class GroundTruthScoring:
         self._first_seen: dict[str, int] = {}
         self._detected_at: dict[str, int] = {}
         self._person_tracks: list[np.ndarray] = []
+        self._vehicle_outlines: list[tuple[float, list[np.ndarray]]] = []
 
     def _current_truth(self, bench) -> dict[str, np.ndarray]:
         if self._revision != bench.layout_revision:
@@ -136,6 +140,9 @@ class GroundTruthScoring:
     def on_scan(self, bench, record: ScanRecord) -> None:
         """Note where people stand and whether a watched box was seen and mapped."""
         self._person_tracks.extend(p for p in bench.person_positions.values() if p is not None)
+        outlines = getattr(bench, "vehicle_outlines", None)
+        if outlines is not None:
+            self._vehicle_outlines.append((record.scan.stamp, outlines()))
         if not self._watch:
             return
         truth = self._current_truth(bench)
@@ -180,7 +187,18 @@ class GroundTruthScoring:
         lap_log.detection, lap_log.false_objects_from_people = score_lap(
             bench.local_maps, bench.segments, truth, self._person_tracks
         )
+        if hasattr(bench, "vehicle_outlines"):
+            lap_log.false_objects_from_vehicles = false_objects_near(
+                bench.local_maps, bench.segments, truth, self._vehicles_at)
         bench.log.truth_after_lap.append(truth)
+
+    def _vehicles_at(self, t: float) -> shapely.Geometry:
+        """Return where the vehicles stood at the safety scan nearest ``t`` (of the run)."""
+        if not self._vehicle_outlines:
+            return shapely.Polygon()
+        stamps = np.array([stamp for stamp, _ in self._vehicle_outlines])
+        outlines = self._vehicle_outlines[int(np.argmin(np.abs(stamps - t)))][1]
+        return shapely.union_all(shapely.polygons(outlines)) if outlines else shapely.Polygon()
 
 
 class Table1Reference:

@@ -91,6 +91,9 @@ def detection_metrics(laps: Sequence[LapLog]) -> dict[str, Any]:
         "recall": overall["recall"],
         "f1": overall["f1"],
         "false_objects_from_people": sum(lap.false_objects_from_people for lap in laps),
+        **({"false_objects_from_vehicles": sum(lap.false_objects_from_vehicles or 0
+                                               for lap in laps)}
+           if any(lap.false_objects_from_vehicles is not None for lap in laps) else {}),
         "per_lap": [{"lap": lap.lap, **lap.detection} for lap in laps],
         "latency_scans": {
             f"lap_{lap.lap:02d}/{name}": value
@@ -159,6 +162,8 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "safety_scans": len(log.mapper_seconds),
         },
         **extra,
+        **({"vehicles": {name: summarize(vehicle) for name, vehicle in log.vehicles.items()}}
+           if log.vehicles else {}),
     }
 
 
@@ -197,6 +202,32 @@ def policy_comparison(conservative: Mapping[str, Any], adaptive: Mapping[str, An
     }
 
 
+def sharing_comparison(on: Mapping[str, Any], off: Mapping[str, Any]) -> dict:
+    """Return every vehicle's lap times with sharing on and off and the share saved per lap.
+
+    ``saved_percent`` is ``100 (off - on) / off`` per lap: positive where sharing made
+    the lap faster.
+
+    Examples
+    --------
+    >>> on = {"vehicles": {"a": {"safety": {"lap_time_s": [10.0, 9.0]}}}}
+    >>> off = {"vehicles": {"a": {"safety": {"lap_time_s": [10.0, 10.0]}}}}
+    >>> sharing_comparison(on, off)
+    {'a': {'on': [10.0, 9.0], 'off': [10.0, 10.0], 'saved_percent': [0.0, 10.0]}}
+    """
+    result = {}
+    for name, vehicle in on.get("vehicles", {}).items():
+        times_on = vehicle["safety"]["lap_time_s"]
+        times_off = off["vehicles"][name]["safety"]["lap_time_s"]
+        result[name] = {
+            "on": times_on,
+            "off": times_off,
+            "saved_percent": [round(100.0 * (b - a) / b, 3) if b else None
+                              for a, b in zip(times_on, times_off, strict=False)],
+        }
+    return result
+
+
 def table1_rows(name: str, table: Mapping[str, Any]) -> list[list[Any]]:
     """Return the CSV rows (header first) of one run's Table 1 (cm)."""
     row = [name]
@@ -225,6 +256,16 @@ def json_text(data: Any) -> str:
     return json.dumps(data, indent=2, allow_nan=False) + "\n"
 
 
+def _last_lap(log: RunLog) -> slice:
+    return slice(log.laps[-1].first_tick if log.laps else 0, None)
+
+
+def _write_maps(folder: Path, maps_after_lap: Sequence[Mapping[str, dict]]) -> None:
+    folder.mkdir()
+    for lap, maps in enumerate(maps_after_lap, start=1):
+        (folder / f"lap_{lap:02d}.geojson").write_text(json_text(_map_collection(maps)))
+
+
 def _figures(log: RunLog, staging: Path) -> None:
     folder = staging / "figures"
     folder.mkdir()
@@ -238,14 +279,27 @@ def _figures(log: RunLog, staging: Path) -> None:
         if f["geometry"] is not None
     ]
     truth = log.truth_after_lap[-1] if log.truth_after_lap else None
-    last_lap = slice(log.laps[-1].first_tick if log.laps else 0, None)
-    plot_polygonal_map(
-        log.world, polylines, folder / "polygonal_map.png", truth_outlines=truth,
-        trajectory=np.asarray(log.true_poses[last_lap]).reshape(-1, 3),
-        estimate=np.asarray(log.estimated_poses[last_lap]).reshape(-1, 3),
-        title=f"{name}: semi-static local maps after lap {len(log.laps)} (paper Fig. 4)",
-    )
-    history = log.ekf_history
+    if log.vehicles:
+        lead = next(iter(log.vehicles.values()))
+        plot_polygonal_map(
+            log.world, polylines, folder / "polygonal_map.png", truth_outlines=truth,
+            trajectories={
+                vehicle: np.asarray(each.true_poses[_last_lap(each)]).reshape(-1, 3)
+                for vehicle, each in log.vehicles.items()
+            },
+            title=f"{name}: {next(iter(log.vehicles))}'s local maps after lap "
+                  f"{len(lead.laps)}, every vehicle's last lap",
+        )
+    else:
+        last_lap = _last_lap(log)
+        plot_polygonal_map(
+            log.world, polylines, folder / "polygonal_map.png", truth_outlines=truth,
+            trajectory=np.asarray(log.true_poses[last_lap]).reshape(-1, 3),
+            estimate=np.asarray(log.estimated_poses[last_lap]).reshape(-1, 3),
+            title=f"{name}: semi-static local maps after lap {len(log.laps)} (paper Fig. 4)",
+        )
+    # A fleet's figure shows its first vehicle (its metrics cover them all).
+    history = next(iter(log.vehicles.values())).ekf_history if log.vehicles else log.ekf_history
     if len(history.get("stamp", ())):
         plot_ekf_corrections(
             history["stamp"], history["correction"], history["sigma"],
@@ -264,7 +318,8 @@ def _figures(log: RunLog, staging: Path) -> None:
             title=f"{name}: an associated pair, reference (top) and scan (paper Fig. 2)",
         )
     plot_detection_scores(
-        [{"lap": lap.lap, **lap.detection} for lap in log.laps],
+        [{"lap": lap.lap, **lap.detection}
+         for lap in (next(iter(log.vehicles.values())).laps if log.vehicles else log.laps)],
         folder / "detection_scores.png", title=f"{name}: semi-static object detection",
     )
 
@@ -275,13 +330,18 @@ def write_outputs(
     *,
     figures: bool = True,
     comparison: Mapping[str, Any] | None = None,
+    sharing_off: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write the run's output directory and return the metrics written.
 
     ``comparison`` is the other policy's summary on the same scenario and seed; it adds
-    ``policy_comparison`` to the metrics and ``figures/lap_times.png``.
+    ``policy_comparison`` to the metrics and ``figures/lap_times.png``. ``sharing_off``
+    is the summary of the same fleet run with sharing off; it adds
+    ``sharing_comparison`` and ``figures/lap_times_sharing.png``.
     """
     metrics = summarize(log)
+    if sharing_off is not None:
+        metrics["sharing_comparison"] = sharing_comparison(metrics, sharing_off)
     if comparison is not None:
         other = comparison
         conservative = policy_name(log.spec.policy) == "conservative"
@@ -292,11 +352,10 @@ def write_outputs(
         (staging / "metrics.json").write_text(json_text(metrics))
         rows = table1_rows(log.spec.name, metrics["table1_cm"])
         (staging / "table1.csv").write_text(csv_text(rows))
-        (staging / "maps").mkdir()
-        for lap, maps in enumerate(log.maps_after_lap, start=1):
-            (staging / "maps" / f"lap_{lap:02d}.geojson").write_text(
-                json_text(_map_collection(maps))
-            )
+        _write_maps(staging / "maps", log.maps_after_lap)
+        # A fleet: maps/ holds the first vehicle's, maps/NAME/ every vehicle's own.
+        for vehicle, each in log.vehicles.items():
+            _write_maps(staging / "maps" / vehicle, each.maps_after_lap)
         if figures:
             _figures(log, staging)
             if comparison is not None:
@@ -306,6 +365,16 @@ def write_outputs(
                     staging / "figures" / "lap_times.png",
                     stops={p: times[p]["stops_per_lap"] for p in ("conservative", "adaptive")},
                     title=f"{log.spec.name}: lap times by field policy (same seed)",
+                )
+            if sharing_off is not None:
+                change = metrics["sharing_comparison"]
+                plot_lap_times(
+                    {f"{name}, {state}": change[name][key]
+                     for name in change for state, key in (("sharing", "on"),
+                                                           ("no sharing", "off"))},
+                    staging / "figures" / "lap_times_sharing.png",
+                    title=f"{log.spec.name}: lap times per vehicle, sharing on and off "
+                          "(same seed)",
                 )
 
     stage_and_publish(Path(out_dir), fill)

@@ -189,6 +189,25 @@ class AdaptivePolicy:
         """Take the confirmed objects of every segment's map as they stand now."""
         self.known = {name: known_objects(local_map) for name, local_map in local_maps.items()}
 
+    def refresh_segment(self, name: str, local_map: LocalMap) -> None:
+        """Take segment ``name``'s confirmed objects now (its map was merged with the fleet's).
+
+        A vehicle calls this as it enters a segment whose map it fetched from the fleet
+        map store: what another vehicle confirmed serves this vehicle's fields at once.
+
+        Examples
+        --------
+        >>> import dataclasses
+        >>> policy = AdaptivePolicy()
+        >>> shared = LocalMap()
+        >>> _ = shared.add([[1.0, -1.0], [1.0, 1.0]])
+        >>> shared.restore(dataclasses.replace(shared[0], status="confirmed"), replace=True)
+        >>> policy.refresh_segment("a", shared)
+        >>> len(policy.known["a"])
+        1
+        """
+        self.known[name] = known_objects(local_map)
+
     def counted_readings(self, view: FieldView) -> FieldReadings | None:
         """Return the readings not explained by a known object of the view's segment."""
         known = self.known.get(view.segment.name)

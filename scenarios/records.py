@@ -20,7 +20,7 @@ from semistatic.mapper import UpdateReport
 from semistatic.types import Scan
 from worlds.spec import WorldSpec
 
-__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule"]
+__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule", "combine_logs"]
 
 
 class Schedule:
@@ -68,6 +68,7 @@ class LapLog:
     slowed_time_s: float = 0.0
     detection: dict = field(default_factory=dict)
     false_objects_from_people: int = 0
+    false_objects_from_vehicles: int | None = None  # scored in a fleet only
     latencies: dict[str, int | None] = field(default_factory=dict)
     person_stopped_robot: bool = False
 
@@ -165,3 +166,66 @@ class RunLog:
     wall_time_s: float = 0.0
     engine_time_s: float = 0.0
     sharing: dict | None = None
+    vehicles: dict[str, RunLog] = field(default_factory=dict)
+
+
+def combine_logs(fleet: RunLog, vehicles: dict[str, RunLog], store=None) -> None:
+    """Fill a fleet's ``RunLog`` from its vehicles' logs: the fleet as a whole.
+
+    Laps, poses, Table 1 distances (keys prefixed with the vehicle name), timings and
+    EKF histories are the vehicles' together; the maps and ground truth after each lap
+    are the first vehicle's. With a fleet map store (``semistatic.fleet``), ``sharing``
+    holds the whole traffic and each vehicle's log the messages it sent.
+
+    Examples
+    --------
+    >>> def log():  # only the parts combined here
+    ...     return RunLog(spec=None, world=None, robot=None, segments=())
+    >>> a, b, fleet = log(), log(), log()
+    >>> a.laps.append(LapLog(lap=1, start_time=0.0))
+    >>> b.laps.append(LapLog(lap=1, start_time=2.0))
+    >>> b.table1_distances["east/0"] = [0.01]
+    >>> combine_logs(fleet, {"a": a, "b": b})
+    >>> [lap.start_time for lap in fleet.laps], fleet.table1_distances, list(fleet.vehicles)
+    ([0.0, 2.0], {'b/east/0': [0.01]}, ['a', 'b'])
+    """
+    fleet.vehicles = dict(vehicles)
+    logs = list(vehicles.values())
+    for name, log in vehicles.items():
+        fleet.laps += log.laps
+        fleet.stamps += log.stamps
+        fleet.true_poses += log.true_poses
+        fleet.estimated_poses += log.estimated_poses
+        fleet.covariances += log.covariances
+        fleet.mapper_seconds += log.mapper_seconds
+        fleet.raycast_seconds += log.raycast_seconds
+        fleet.table1_distances.update(
+            {f"{name}/{key}": value for key, value in log.table1_distances.items()})
+        if fleet.example_pair is None:
+            fleet.example_pair = log.example_pair
+    histories = [log.ekf_history for log in logs if len(log.ekf_history.get("stamp", ()))]
+    if histories:
+        fleet.ekf_history = {key: np.concatenate([h[key] for h in histories])
+                             for key in histories[0]}
+    fleet.maps_after_lap = list(logs[0].maps_after_lap)
+    fleet.truth_after_lap = list(logs[0].truth_after_lap)
+    fleet.reference_maps = logs[0].reference_maps
+    if store is not None:
+        traffic = store.traffic_arrays()
+        fleet.sharing = _traffic(store.totals(), traffic, np.ones(len(store.traffic), bool))
+        for index, log in enumerate(logs):
+            mine = traffic["sender"] == index if len(store.traffic) else np.zeros(0, bool)
+            log.sharing = _traffic(None, traffic, mine)
+
+
+def _traffic(totals: dict | None, traffic: dict, selected: np.ndarray) -> dict:
+    if not selected.size:
+        empty: list = []
+        return {"messages": 0, "bytes": 0, "grid_bytes": 0, "stamp": empty,
+                "message_bytes": empty, "message_grid_bytes": empty}
+    sizes, grids = traffic["bytes"][selected], traffic["grid_bytes"][selected]
+    if totals is None:
+        totals = {"messages": int(selected.sum()), "bytes": int(sizes.sum()),
+                  "grid_bytes": int(grids.sum())}
+    return {**totals, "stamp": traffic["stamp"][selected].tolist(),
+            "message_bytes": sizes.tolist(), "message_grid_bytes": grids.tolist()}

@@ -36,6 +36,7 @@ from scenarios.spec import (
     Rates,
     SafetySettings,
     ScenarioSpec,
+    VehicleSpec,
 )
 from semistatic.params import MapperParams
 from semistatic.validation import SAFE_NAME
@@ -50,6 +51,7 @@ SECTIONS = (
     ("Scenario `[safety]`", SafetySettings),
     ("Scenario `[mapper]`", MapperParams),
     ("Scenario `[[moves]]`", BoxMove),
+    ("Scenario `[[vehicles]]`", VehicleSpec),
     ("World file: top level", WorldSpec),
     ("World `walls = [...]` items", WallSpec),
     ("World `posts = [...]` items", PostSpec),
@@ -67,6 +69,7 @@ CHOICES = {
     (ScenarioSpec, "policy"): POLICIES,
     (ScenarioSpec, "robot"): tuple(sorted(PRESETS)),
     (BoxMove, "action"): BOX_ACTIONS,
+    (VehicleSpec, "robot"): tuple(sorted(PRESETS)),
 }
 """Fields whose value is one of a few words (the rest come from ``Literal`` types)."""
 

@@ -34,6 +34,9 @@ class SegmentPublisher:
         The fleet map store (a new one when omitted).
     sender
         The publishing vehicle's index.
+    segment_names
+        The fleet's segment names in path order (a message names a segment by its place
+        there); default: the bench's segments.
 
     The last segment of the last lap is published when the run ends. The traffic totals
     and per-message arrays go to ``bench.log.sharing`` at every lap end.
@@ -46,9 +49,11 @@ class SegmentPublisher:
 
     reads_map_polylines = False  # reads the maps at segment changes, not every scan
 
-    def __init__(self, store: FleetMapStore | None = None, sender: int = 0) -> None:
+    def __init__(self, store: FleetMapStore | None = None, sender: int = 0,
+                 segment_names: list[str] | None = None) -> None:
         self.store = FleetMapStore() if store is None else store
         self.sender = int(sender)
+        self.segment_names = segment_names
         self._segment: str | None = None
         self._entered = 0.0
 
@@ -74,7 +79,7 @@ class SegmentPublisher:
         }
 
     def _publish(self, bench, stamp: float) -> None:
-        names = [segment.name for segment in bench.segments]
+        names = self.segment_names or [segment.name for segment in bench.segments]
         index = names.index(self._segment)
         self.store.publish(index, self.sender, bench.local_maps[self._segment], stamp=stamp,
                            since=self._entered)

@@ -24,6 +24,7 @@ __all__ = [
     "Rates",
     "SafetySettings",
     "ScenarioSpec",
+    "VehicleSpec",
 ]
 
 MAX_LAPS = 1000
@@ -166,6 +167,42 @@ class BoxMove:
 
 
 @dataclass(frozen=True)
+class VehicleSpec:
+    """One vehicle of a fleet (array of tables ``[[vehicles]]``).
+
+    Every vehicle drives the world's path (its route) with its own sensors, encoders,
+    EKF, follower, safety supervisor, local maps and random streams. Its laps start and
+    end where it starts: at the start of segment ``start_segment`` (a start offset along
+    the route, so a closed route can carry vehicles spread round the loop).
+
+    Parameters
+    ----------
+    name
+        Name of the vehicle (a key of ``metrics.json``'s ``vehicles``).
+    robot
+        Robot preset (default: the scenario's ``robot``).
+    start_segment
+        Name of the path segment at whose start the vehicle starts (default: the first).
+
+    Examples
+    --------
+    >>> VehicleSpec("lgv2", start_segment="north_east").robot
+    ''
+    >>> VehicleSpec("lgv 2")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: name: ...
+    """
+
+    name: str = field(metadata=safe_name())
+    robot: str = ""
+    start_segment: str = ""
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class ScenarioSpec:
     """One experiment. ``world`` is a bundled world name or a path (relative to the file).
 
@@ -204,6 +241,12 @@ class ScenarioSpec:
         Mapper thresholds (table ``[mapper]``).
     moves
         Box changes between laps (array of tables ``[[moves]]``).
+    vehicles
+        The vehicles of a fleet (array of tables ``[[vehicles]]``); none: one vehicle,
+        ``robot``, starting at the path start. With several vehicles, a lap's box moves
+        happen when the first vehicle starts that lap; a vehicle is a dynamic obstacle
+        for the others (their lasers see it, their protective fields stop for it, their
+        mappers leave it out).
     source
         Set by the loader to the file read; not a key of the file.
     """
@@ -224,6 +267,7 @@ class ScenarioSpec:
     safety: SafetySettings = field(default_factory=SafetySettings)
     mapper: MapperParams = field(default_factory=MapperParams)
     moves: tuple[BoxMove, ...] = ()
+    vehicles: tuple[VehicleSpec, ...] = ()
     source: str = MEMORY
 
     def __post_init__(self) -> None:
@@ -238,3 +282,8 @@ class ScenarioSpec:
                     f"moves[{index}].lap",
                     f"lap {move.lap} never runs with laps = {self.laps}",
                 )
+        names = [vehicle.name for vehicle in self.vehicles]
+        for index, name in enumerate(names):
+            if name in names[:index]:
+                raise SpecError(MEMORY, f"vehicles[{index}].name",
+                                f"vehicle {name!r} is named twice; give each a name of its own")

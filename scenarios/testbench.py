@@ -18,6 +18,13 @@ the semi-static boxes changed as the scenario says, "while the robot is not obse
 The tick does what the robot does; the simulator's ground truth is only read by
 observers (scoring, the paper's Table 1 experiment, recording, progress).
 
+A scenario with ``[[vehicles]]`` drives a fleet in one world: each vehicle
+(:class:`~scenarios.vehicle.Vehicle`, in ``bench.vehicles`` by name) runs the tick above
+with its own stack and laps, scored by observers of its own; the bench's observers and
+its single-robot properties (``true_pose``, ``local_maps``, ``lap`` ...) follow the
+first vehicle. A lap's box moves happen when the first vehicle starts it; a vehicle that
+drove its laps leaves the hall (:data:`PARKING`) and the run ends when all have.
+
 Examples
 --------
 >>> with Testbench("pal1") as bench:
@@ -31,7 +38,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Mapping
 from types import MappingProxyType
@@ -39,103 +45,31 @@ from typing import Any
 
 import numpy as np
 
-from robots.ekf import EKFLocalizer, EKFParams
-from robots.follower import ChainedFormFollower, FollowerParams
-from robots.landmarks import detect_landmarks
-from robots.lasers import LaserSpec
-from robots.path import SplinePath
 from robots.presets import UGVSpec
-from robots.safety import FieldState, SafetyPolicy, SafetySupervisor, scan_points_in_robot_frame
 from scenarios.layout import lap_worlds, robot_preset
 from scenarios.load import load_scenario
 from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference
-from scenarios.policies import FieldPolicy, FieldView, counted_occupancy, field_policy
-from scenarios.records import LapLog, RunLog, ScanRecord, Schedule
-from scenarios.segments import PathSegment, path_segments, segment_index
+from scenarios.policies import FieldPolicy
+from scenarios.records import LapLog, RunLog, Schedule, combine_logs
+from scenarios.routes import fleet_vehicles, route_from
+from scenarios.segments import PathSegment, path_segments
 from scenarios.sharing import SegmentPublisher
 from scenarios.spec import ScenarioSpec
-from semistatic.adaptation import minimum_protective_field
-from semistatic.frames import compose
+from scenarios.vehicle import RELOCALIZE_ATTEMPTS, SETTLE_STEPS, ZONES, Vehicle
+from semistatic.fleet import FleetMapStore
 from semistatic.local_map import LocalMap
-from semistatic.types import Scan
 from sim.client import SimClient
-from sim.contacts import ContactMonitor
-from sim.encoders import WheelEncoders
-from sim.laser import RaycastLaser
 from sim.people import People
 from sim.random_streams import RandomStreams
-from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from worlds.checks import build_spline
 from worlds.spec import BoxSpec, WorldSpec
 
-__all__ = ["RELOCALIZE_ATTEMPTS", "SETTLE_STEPS", "ZONES", "Testbench"]
+__all__ = ["PARKING", "RELOCALIZE_ATTEMPTS", "SETTLE_STEPS", "ZONES", "Testbench"]
 
-SETTLE_STEPS = 24
-"""Physics steps the robot rests after being put back at the start (0.1 s at 240 Hz)."""
-
-RELOCALIZE_ATTEMPTS = 10
-"""Localization scans tried at a lap start before the run gives up on triangulation."""
-
-ZONES = {"clear": "free", "warning": "warning", "protective": "protective"}
-"""The safety supervisor's zone names as the bench reports them."""
-
-
-class _Robot:
-    """The simulated vehicle and its onboard stack for one run (not part of the API)."""
-
-    def __init__(self, sim: SimClient, world: SimWorld, spec: ScenarioSpec, robot: UGVSpec,
-                 path: SplinePath, streams: RandomStreams) -> None:
-        self.spec = robot
-        self.start = path.pose(0.0)
-        self.body = SimUGV(sim, robot, self.start)
-        # Each noisy component draws from its own stream (sim.random_streams).
-        self.encoders = WheelEncoders(
-            _scaled_robot(robot, spec.noise.odometry), streams.generator("encoders")
-        )
-        localization_spec = _scaled_laser(robot.localization_laser.laser, spec.noise.range)
-        self.localization_laser = RaycastLaser(
-            sim, localization_spec, world, streams.generator("laser/localization"),
-            ignore_body_ids=(self.body.body_id,),
-        )
-        self.shared_laser = robot.safety_laser is robot.localization_laser
-        if self.shared_laser:
-            self.safety_laser = self.localization_laser
-        else:
-            safety_spec = _scaled_laser(robot.safety_laser.laser, spec.noise.range)
-            self.safety_laser = RaycastLaser(
-                sim, safety_spec, world, streams.generator("laser/safety"),
-                ignore_body_ids=(self.body.body_id,),
-            )
-        self.localization_mount = robot.localization_laser
-        self.safety_mount = robot.safety_laser
-        posts = world.posts
-        # The laser's systematic range error (constant per unit, uniform in +-b) is the
-        # filter's fourth state; without it the EKF is overconfident (NEES ~100 on pal1).
-        bias_sigma = localization_spec.range_bias_max / math.sqrt(3.0)
-        self.ekf = EKFLocalizer(
-            [post.xy for post in posts],
-            EKFParams(mount=tuple(robot.localization_laser.pose2d()), range_bias_sigma=bias_sigma),
-        )
-        self.post_radius = posts[0].radius if posts else 0.04
-        self.follower = ChainedFormFollower(path, FollowerParams(speed=world.spec.path.speed))
-
-    def landmarks(self, scan: Scan) -> list:
-        laser = self.localization_mount.laser
-        return detect_landmarks(
-            scan,
-            post_radius=self.post_radius,
-            range_sigma=max(laser.range_sigma, 1e-3),
-            bearing_sigma=laser.angular_resolution / math.sqrt(12.0),
-        )
-
-
-def _scaled_robot(robot: UGVSpec, factor: float) -> UGVSpec:
-    return robot.replace(encoder_slip_sigma=robot.encoder_slip_sigma * factor)
-
-
-def _scaled_laser(laser: LaserSpec, factor: float) -> LaserSpec:
-    return dataclasses.replace(laser, range_sigma=laser.range_sigma * factor)
+PARKING = (-5.0, -5.0, 0.0)
+"""Where a fleet vehicle that drove its laps leaves the hall (outside the walls, the
+next one 3 m further west): it must not block the route of the others."""
 
 
 class Testbench:
@@ -193,9 +127,14 @@ class Testbench:
         self.gui = bool(gui)
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
-        self.observers: list = [GroundTruthScoring(), Table1Reference()]
-        if spec.sharing:
-            self.observers.append(SegmentPublisher())
+        self.fleet_size = len(fleet_vehicles(spec))
+        # One vehicle reports to the bench's observers; a fleet scores each vehicle with
+        # observers of its own (Vehicle.observers) and the bench's follow the first one.
+        self.observers: list = []
+        if self.fleet_size == 1:
+            self.observers += [GroundTruthScoring(), Table1Reference()]
+            if spec.sharing:
+                self.observers.append(SegmentPublisher())
         if self.gui:
             self.observers.append(GuiView())
         self.log: RunLog | None = None
@@ -233,51 +172,65 @@ class Testbench:
         self.close()
         self._wall_start = time.perf_counter()
         spec = self.spec if seed is None else dataclasses.replace(self.spec, seed=seed)
+        self.log_spec = spec
         self._worlds = lap_worlds(spec, world=self._world_override)
         base_world = self._worlds[0]
         path = build_spline(base_world.path)
         self.segments: tuple[PathSegment, ...] = path_segments(base_world, path)
+        self._segment_keys = {segment.name: segment.index for segment in self.segments}
         self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec,
                           segments=self.segments)
         self.streams = RandomStreams(spec.seed)
         rates = spec.rates
         self._sim = sim = SimClient(gui=self.gui, time_step=1.0 / rates.physics_hz)
         self.world = SimWorld(sim, base_world)
-        self._robot = _Robot(sim, self.world, spec, self._robot_spec, path, self.streams)
+        self.store = FleetMapStore() if spec.sharing and self.fleet_size > 1 else None
+        self.fleet: list[Vehicle] = []
+        for index, vehicle in enumerate(fleet_vehicles(spec)):
+            robot = self._robot_spec if index == 0 and not spec.vehicles else \
+                robot_preset(vehicle.robot, file=spec.source)
+            self.fleet.append(Vehicle(self, index, vehicle.name, robot,
+                                      route_from(base_world, vehicle.start_segment),
+                                      store=self.store))
+        self.vehicles: Mapping[str, Vehicle] = MappingProxyType(
+            {vehicle.name: vehicle for vehicle in self.fleet})
+        if self.fleet_size == 1:
+            self.fleet[0].log = self.log  # the run's log is the vehicle's
+        else:
+            self._attach_fleet_observers(spec)
         self._people = People(self.world)
-        self._contacts = ContactMonitor(sim, self._robot.body.body_id, self.world)
         self._control = Schedule(rates.control_hz, rates.physics_hz)
         self._localization = Schedule(rates.localization_hz, rates.physics_hz)
         self._safety = Schedule(rates.safety_hz, rates.physics_hz)
-        self._control_dt = 1.0 / rates.control_hz
-        self._safety_dt = 1.0 / rates.safety_hz
-        self._supervisor = SafetySupervisor(
-            self.segments[0].fields,
-            SafetyPolicy(
-                warning_speed_scale=spec.safety.slowdown,
-                release_delay=spec.safety.release_delay,
-                min_points=spec.safety.min_points,
-            ),
-        )
-        self._minimum_fields = [
-            minimum_protective_field(seg.fields.protective, spec.safety.min_protective_depth)
-            for seg in self.segments
-        ]
-        self._local_maps = {
-            seg.name: LocalMap(seg.origin, [seg.safety_area], params=spec.mapper, segment=seg.name)
-            for seg in self.segments
-        }
-        self.policy = field_policy(spec.policy)
         self._step_count = 0
-        self._speed_scale = 1.0
-        self._zone = "clear"
-        # Wheel odometry alone (what /odom would carry), integrated beside the EKF.
-        self._odom_pose = np.zeros(3)
         self.person_positions: dict[str, np.ndarray | None] = {}
         self.layout_revision = 0
         self.done = False
         self._hooks = None
-        self._begin_lap(1)
+        self._apply_layout(self._worlds[0])
+        for vehicle in self.fleet:
+            vehicle.begin_lap(1)
+
+    def _attach_fleet_observers(self, spec: ScenarioSpec) -> None:
+        """Give every vehicle of a fleet its own scoring (and publishing) observers."""
+        names = [segment.name for segment in self.segments]
+        for vehicle in self.fleet:
+            vehicle.observers += [GroundTruthScoring(), Table1Reference()]
+            if self.store is not None:
+                vehicle.observers.append(
+                    SegmentPublisher(self.store, vehicle.index, segment_names=names))
+
+    def segment_key(self, name: str) -> int:
+        """Return the fleet-wide index of segment ``name`` (its place in the world's path).
+
+        Examples
+        --------
+        >>> with Testbench("pal1") as bench:
+        ...     bench.reset()
+        ...     [bench.segment_key(segment.name) for segment in bench.segments]
+        [0, 1, 2]
+        """
+        return self._segment_keys[name]
 
     def close(self) -> None:
         """Disconnect from PyBullet (the log stays readable); safe to call twice.
@@ -317,40 +270,37 @@ class Testbench:
         1
         """
         self._require_running()
-        sim, robot = self._sim, self._robot
-        lap_log = self.lap_log
-        self.person_positions = self._people.update(sim.sim_time, lap_start=lap_log.start_time)
+        self._walk_people()
+        self._sense_and_command()
+        self._sim.step()
+        self._after_physics()
+
+    # The tick in named pieces (physics stepping and per-tick glue stay easy to find).
+    def _walk_people(self) -> None:
+        lead = self.fleet[0]
+        self.person_positions = self._people.update(self._sim.sim_time,
+                                                    lap_start=lead.lap_log.start_time)
+
+    def _sense_and_command(self) -> None:
         self._step_count += 1
         n = self._step_count
-        control_due = self._control.due(n)
-        localization_due = self._localization.due(n)
-        safety_due = self._safety.due(n)
-        if control_due or localization_due or safety_due:
-            self._predict()
-        scan = None
-        if localization_due:
-            scan = self._scan(robot.localization_laser, robot.localization_mount)
-            robot.ekf.update(robot.landmarks(scan), scan.stamp)
-        if safety_due:
-            if not (robot.shared_laser and scan is not None):
-                scan = self._scan(robot.safety_laser, robot.safety_mount)
-            record = self._supervise_and_map(scan)
-            lap_log.safety_scans += 1
-            for hook in self._observer_hooks("on_scan"):
-                hook(self, record)
-        if control_due:
-            self._record_pose()
-            v, omega = robot.follower.command(
-                robot.ekf.pose, self._control_dt, speed_scale=self._speed_scale
-            )
-            robot.body.command(v, omega)
-        sim.step()
-        self._contacts.check()
-        for hook in self._observer_hooks("on_tick"):
+        due = (self._control.due(n), self._localization.due(n), self._safety.due(n))
+        for vehicle in self.fleet:
+            vehicle.sense_and_command(*due)
+
+    def _after_physics(self) -> None:
+        for vehicle in self.fleet:
+            if not vehicle.done:
+                vehicle.contacts.check()
+        for hook in self.observer_hooks("on_tick"):
             hook(self)
-        elapsed = sim.sim_time - lap_log.start_time
-        if robot.follower.done or elapsed > self.log.spec.lap_timeout:
-            self._end_lap()
+        for vehicle in self.fleet:
+            for observer in vehicle.observers:
+                if hasattr(observer, "on_tick"):
+                    observer.on_tick(vehicle)
+        for vehicle in self.fleet:
+            if vehicle.lap_over():
+                self._end_lap(vehicle)
 
     def run_lap(self) -> LapLog:
         """Run to the end of the current lap and return its log; the next lap is set up.
@@ -387,6 +337,16 @@ class Testbench:
 
     # ------------------------------------------------------------------ state
     @property
+    def lead(self) -> Vehicle:
+        """Return the first vehicle: the one ``true_pose``, ``local_maps`` ... describe."""
+        return self.fleet[0]
+
+    @property
+    def lap_log(self) -> LapLog:
+        """Return the first vehicle's current lap log."""
+        return self.fleet[0].lap_log
+
+    @property
     def lap(self) -> int:
         """Return the current lap, counted from 1 (the last lap once the run is done)."""
         return self.lap_log.lap
@@ -403,43 +363,61 @@ class Testbench:
 
     @property
     def true_pose(self) -> np.ndarray:
-        """Return the simulator's true robot pose ``(x, y, theta)`` (for scoring only)."""
-        return self._robot.body.true_pose()
+        """Return the simulator's true robot pose ``(x, y, theta)`` (for scoring only).
+
+        With several vehicles, the first one's; ``bench.vehicles[name].true_pose`` is any
+        vehicle's.
+
+        Examples
+        --------
+        >>> with Testbench("warehouse_fleet") as bench:
+        ...     bench.reset()
+        ...     names = [name for name in bench.vehicles]
+        ...     same = bool((bench.true_pose == bench.vehicles["lgv1"].true_pose).all())
+        ...     names, bench.vehicles["lgv2"].segment.name, same
+        (['lgv1', 'lgv2', 'lgv3'], 'north_west', True)
+        """
+        return self.fleet[0].true_pose
 
     @property
     def true_twist(self) -> np.ndarray:
         """Return the simulator's true ``(v_forward, v_left, omega)`` of the robot (m/s, rad/s)."""
-        return self._robot.body.true_twist()
+        return self.fleet[0].true_twist
 
     @property
     def ekf_pose(self) -> np.ndarray:
         """Return the EKF's robot pose estimate ``(x, y, theta)``, world frame."""
-        return self._robot.ekf.pose
+        return self.fleet[0].ekf_pose
 
     @property
     def ekf_covariance(self) -> np.ndarray:
         """Return the EKF's ``(3, 3)`` pose covariance."""
-        return self._robot.ekf.covariance
+        return self.fleet[0].ekf_covariance
 
     @property
     def local_maps(self) -> Mapping[str, LocalMap]:
         """Return the local map of every path segment by segment name (read-only mapping)."""
-        return MappingProxyType(self._local_maps)
+        return self.fleet[0].local_maps
 
     @property
     def zone(self) -> str:
         """Return the safety zone after the last safety scan: free, warning or protective."""
-        return ZONES[self._zone]
+        return self.fleet[0].zone
 
     @property
     def speed_scale(self) -> float:
         """Return the speed factor the safety fields impose (1 free, 0 stopped)."""
-        return self._speed_scale
+        return self.fleet[0].speed_scale
+
+    @property
+    def policy(self) -> FieldPolicy:
+        """Return the first vehicle's field policy (each vehicle has its own)."""
+        return self.fleet[0].policy
 
     @property
     def segment(self) -> PathSegment:
         """Return the path segment the robot is on (by the follower's progress)."""
-        return self.segments[segment_index(self.segments, self._robot.follower.progress)]
+        return self.fleet[0].segment
 
     @property
     def sim(self) -> SimClient:
@@ -508,8 +486,8 @@ class Testbench:
         if self.done:
             raise RuntimeError("Testbench: every lap has run; call reset() to start over")
 
-    def _observer_hooks(self, name: str) -> Any:
-        """Return the observers' ``name`` hooks, or ``"wants_polylines"``; cached."""
+    def observer_hooks(self, name: str) -> Any:
+        """Return the bench observers' ``name`` hooks, or ``"wants_polylines"``; cached."""
         if self._hooks is None:
             self._hooks = {
                 hook: [getattr(o, hook) for o in self.observers if hasattr(o, hook)]
@@ -542,151 +520,29 @@ class Testbench:
         if changed:
             self.layout_revision += 1
 
-    def _begin_lap(self, lap: int) -> None:
-        sim, robot = self._sim, self._robot
-        self._apply_layout(self._worlds[lap - 1])
-        if lap > 1 and robot.follower.path.closed:
-            self._continue_loop(lap)
+    def _end_lap(self, vehicle: Vehicle) -> None:
+        """Close ``vehicle``'s lap; set up its next one (the first vehicle's brings the boxes)."""
+        if vehicle.end_lap():
+            lap = vehicle.lap_log.lap + 1
+            if vehicle.index == 0:
+                self._apply_layout(self._worlds[lap - 1])
+            vehicle.begin_lap(lap)
             return
-        robot.body.reset(robot.start)
-        sim.step(SETTLE_STEPS)
-        robot.encoders.reset(robot.body.wheel_angles())
-        robot.follower.reset()
-        self._supervisor.reset()
-        self._supervisor.set_fields(self.segments[0].fields)
-        self._contacts.reset()
-        self._lap_counters = (0, 0, 0)
-        self._speed_scale = 1.0
-        self._zone = "clear"
-        self.lap_log = LapLog(lap=lap, start_time=sim.sim_time, first_tick=len(self.log.stamps))
-        self._relocalize(lap)
-        # Like the EKF, odometry restarts from the triangulated pose: the robot was carried.
-        self._odom_pose = robot.ekf.pose.copy()
-        self._start_lap_hooks(lap)
+        if self.fleet_size > 1:
+            x, y, yaw = PARKING
+            vehicle.park((x - 3.0 * vehicle.index, y, yaw))
+        if all(other.done for other in self.fleet):
+            self._finish()
 
-    def _continue_loop(self, lap: int) -> None:
-        """Start lap ``lap`` of a closed route where the last one ended, at speed.
-
-        The vehicle is not carried anywhere: the EKF keeps tracking, odometry keeps
-        integrating, and the follower's progress wraps from the path end to its start
-        (the same pose on a closed spline).
-        """
-        self._robot.follower.reset(keep_speed=True)
-        stops, slowdowns = self._supervisor.stops, self._supervisor.slowdowns
-        self._lap_counters = (stops, slowdowns, self._contacts.collisions)
-        self.lap_log = LapLog(lap=lap, start_time=self._sim.sim_time,
-                              first_tick=len(self.log.stamps))
-        self._start_lap_hooks(lap)
-
-    def _start_lap_hooks(self, lap: int) -> None:
-        start_lap = getattr(self.policy, "start_lap", None)
-        if start_lap is not None:
-            start_lap(self.local_maps)
-        for hook in self._observer_hooks("on_lap_start"):
-            hook(self, lap)
-
-    def _end_lap(self) -> None:
-        sim, robot, lap_log, log = self._sim, self._robot, self.lap_log, self.log
-        closed = robot.follower.path.closed
-        if not closed or lap_log.lap == log.spec.laps:
-            robot.body.stop()
-        lap_log.duration_s = sim.sim_time - lap_log.start_time
-        lap_log.completed = robot.follower.done
-        # On a closed route the counters run on across laps: a lap's events are the change.
-        stops, slowdowns, collisions = self._lap_counters
-        lap_log.stops = self._supervisor.stops - stops
-        lap_log.slowdowns = self._supervisor.slowdowns - slowdowns
-        lap_log.collisions = self._contacts.collisions - collisions
-        log.maps_after_lap.append(
-            {name: local_map.to_geojson() for name, local_map in self._local_maps.items()}
-        )
-        for hook in self._observer_hooks("on_lap_end"):
-            hook(self, lap_log)
-        log.laps.append(lap_log)
-        if lap_log.lap < log.spec.laps:
-            self._begin_lap(lap_log.lap + 1)
-            return
+    def _finish(self) -> None:
+        sim, log = self._sim, self.log
         self.done = True
-        log.engine_time_s = sim.engine_time_s
-        log.sim_time_s = sim.sim_time
-        log.ekf_history = robot.ekf.history_arrays()
-        log.wall_time_s = time.perf_counter() - self._wall_start
-
-    def _relocalize(self, lap: int) -> None:
-        robot, rates = self._robot, self.log.spec.rates
-        for _ in range(RELOCALIZE_ATTEMPTS):
-            scan = self._scan(robot.localization_laser, robot.localization_mount)
-            if robot.ekf.relocalize(robot.landmarks(scan), scan.stamp):
-                return
-            self._sim.step(max(1, int(rates.physics_hz / rates.localization_hz)))
-        raise RuntimeError(
-            f"lap {lap}: could not triangulate the start pose from the reflective posts "
-            f"({RELOCALIZE_ATTEMPTS} scans); check that >= 3 posts are visible from the path "
-            "start of the world"
-        )
-
-    def _predict(self) -> None:
-        encoders, ekf = self._robot.encoders, self._robot.ekf
-        increment = encoders.odometry_increment(self._robot.body.wheel_angles())
-        ekf.predict(increment, encoders.increment_covariance(encoders.last_tick_deltas))
-        self._odom_pose = compose(self._odom_pose, increment)
-
-    def _scan(self, laser: RaycastLaser, mount) -> Scan:
-        scan = laser.scan(self._robot.body.sensor_pose(mount), stamp=self._sim.sim_time)
-        self.log.raycast_seconds.append(laser.last_raycast_s)
-        return scan
-
-    def _record_pose(self) -> None:
-        log, robot = self.log, self._robot
-        log.stamps.append(self._sim.sim_time)
-        log.true_poses.append(robot.body.true_pose())
-        log.estimated_poses.append(robot.ekf.pose.copy())
-        log.covariances.append(robot.ekf.covariance.copy())
-
-    def _supervise_and_map(self, scan: Scan) -> ScanRecord:
-        robot = self._robot
-        index = segment_index(self.segments, robot.follower.progress)
-        segment = self.segments[index]
-        if self._supervisor.field_set is not segment.fields:
-            self._supervisor.set_fields(segment.fields)
-        points = scan_points_in_robot_frame(scan, robot.safety_mount.pose2d())
-        local_map = self._local_maps[segment.name]
-        output = self._supervisor.update(self._occupancy(points, segment, index, local_map),
-                                         scan.stamp)
-        if output.zone == "protective":
-            self.lap_log.stopped_time_s += self._safety_dt
-        elif output.zone == "warning":
-            self.lap_log.slowed_time_s += self._safety_dt
-        self._speed_scale = output.speed_scale
-        self._zone = output.zone
-
-        ekf_pose = robot.ekf.pose
-        sensor_world = compose(ekf_pose, robot.safety_mount.pose2d())
-        started = time.perf_counter()
-        report = local_map.update(scan, sensor_world)
-        self.log.mapper_seconds.append(time.perf_counter() - started)
-        return ScanRecord(
-            lap=self.lap_log.lap,
-            segment=segment.name,
-            scan=scan,
-            odom_pose=self._odom_pose.copy(),
-            ekf_pose=ekf_pose,  # the EKF returns copies
-            ekf_covariance=robot.ekf.covariance,
-            # Reading the whole map costs; only observers that may read it pay for it.
-            polylines=tuple(line.points for line in local_map.world_polylines().values())
-            if self._observer_hooks("wants_polylines")
-            else (),
-            sensor_pose=sensor_world,
-            report=report,
-        )
-
-    def _occupancy(self, points: np.ndarray, segment: PathSegment, index: int,
-                   local_map: LocalMap) -> FieldState:
-        """Ask the policy which readings count; the protective floor is enforced there."""
-        minimum = self._minimum_fields[index]
-        readings = self.policy.counted_readings(
-            FieldView(points, segment, minimum, self._robot.ekf.pose, local_map,
-                      self.log.spec.safety)
-        )
-        return counted_occupancy(points, segment.fields, minimum, readings,
-                                 self._supervisor.policy.min_points)
+        wall = time.perf_counter() - self._wall_start
+        for vehicle in self.fleet:
+            vehicle.log.engine_time_s = sim.engine_time_s
+            vehicle.log.sim_time_s = sim.sim_time
+            vehicle.log.wall_time_s = wall
+        if self.fleet_size > 1:
+            combine_logs(log, {vehicle.name: vehicle.log for vehicle in self.fleet}, self.store)
+            log.engine_time_s, log.sim_time_s = sim.engine_time_s, sim.sim_time
+            log.wall_time_s = wall

@@ -231,8 +231,9 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     mapper's gate, viewed from the segment's safety-area centre, always with the
     ``"projection"`` restriction: two maps of one object often differ in extent, which the
     paper's vertex restriction reads as a distance of the overhang); an
-    associated pair is merged (:func:`merge`, weighted by hit counts) and takes the
-    status and misses of whichever was seen last. A received polyline with no partner
+    associated pair is merged (:func:`merge`, weighted by hit counts), takes the misses
+    of whichever was seen last and is ``confirmed`` (seen by two vehicles: more than once)
+    unless that last sighting marked it ``blank``. A received polyline with no partner
     joins the map (unless it is blank). An own polyline with no partner that was last seen
     before the sender entered the segment is dropped: the sender drove the segment since
     and its life cycle no longer holds it.
@@ -282,8 +283,10 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
         newer = theirs if theirs.last_seen > mine.last_seen else mine
         geometry = merge(mine.polyline, theirs.polyline, params.epsilon,
                          map_weight=mine.hits / max(theirs.hits, 1))
+        # Two vehicles saw it: confirmed, unless the later sighting found it missing.
+        status = "blank" if newer.status == "blank" else "confirmed"
         local_map.restore(
-            MapPolyline(mine.id, geometry, newer.status, max(mine.hits, theirs.hits),
+            MapPolyline(mine.id, geometry, status, max(mine.hits, theirs.hits),
                         newer.misses, min(mine.first_seen, theirs.first_seen),
                         max(mine.last_seen, theirs.last_seen)),
             replace=True,

@@ -54,8 +54,10 @@ from semistatic.types import Scan
 __all__ = [
     "LASER_IGNORE_GROUP",
     "LASER_RAY_MASK",
+    "MAX_VEHICLES",
     "RaycastLaser",
     "exclude_from_lasers",
+    "vehicle_laser_group",
 ]
 
 LASER_IGNORE_GROUP = 1 << 10
@@ -74,12 +76,15 @@ _HIT_BODY = itemgetter(0)
 _HIT_FRACTION = itemgetter(2)
 
 
-def exclude_from_lasers(sim, body_id: int) -> None:
-    """Hide every link of ``body_id`` from all ``RaycastLaser`` rays; collisions are unchanged.
+def exclude_from_lasers(sim, body_id: int, group: int = LASER_IGNORE_GROUP) -> None:
+    """Hide every link of ``body_id`` from the rays of mask ``~group``; collisions are unchanged.
 
-    Sets the body's collision filter group to ``LASER_IGNORE_GROUP`` and its mask to all
-    bits, so it still collides with every other body (Bullet collides two bodies when
-    each one's group meets the other's mask) while the rays' mask leaves it out.
+    Sets the body's collision filter group to ``group`` (default ``LASER_IGNORE_GROUP``,
+    hidden from every ``RaycastLaser`` with the default mask) and its mask to all bits,
+    so it still collides with every other body (Bullet collides two bodies when each
+    one's group meets the other's mask) while the rays' mask leaves it out. Vehicles of a
+    fleet each take a group of their own (:func:`vehicle_laser_group`): a laser then
+    misses its own vehicle and sees the others.
 
     Examples
     --------
@@ -97,7 +102,26 @@ def exclude_from_lasers(sim, body_id: int) -> None:
     """
     bullet = sim.bullet
     for link in range(-1, bullet.getNumJoints(body_id)):
-        bullet.setCollisionFilterGroupMask(body_id, link, LASER_IGNORE_GROUP, _COLLIDE_WITH_ALL)
+        bullet.setCollisionFilterGroupMask(body_id, link, group, _COLLIDE_WITH_ALL)
+
+
+MAX_VEHICLES = 16
+"""Vehicles that can each have a laser group of their own (bits 10-25)."""
+
+
+def vehicle_laser_group(index: int) -> int:
+    """Return the collision filter group of vehicle ``index``'s body (0: ``LASER_IGNORE_GROUP``).
+
+    Examples
+    --------
+    >>> vehicle_laser_group(0) == LASER_IGNORE_GROUP, vehicle_laser_group(1) == 1 << 11
+    (True, True)
+    >>> bool(~vehicle_laser_group(1) & vehicle_laser_group(0))  # vehicle 1's rays see vehicle 0
+    True
+    """
+    if not 0 <= index < MAX_VEHICLES:
+        raise ValueError(f"vehicle_laser_group: index must be in [0, {MAX_VEHICLES}), got {index}")
+    return LASER_IGNORE_GROUP << index
 
 
 class RaycastLaser:
@@ -118,7 +142,10 @@ class RaycastLaser:
         Threads for ``rayTestBatch`` (0: all available, as in pybullet).
     ignore_body_ids
         Bodies this laser must not see (the robot carrying it); passed to
-        ``exclude_from_lasers``, which hides them from every laser.
+        ``exclude_from_lasers`` with ``ignore_group``.
+    ignore_group
+        Collision filter group of those bodies; this laser's rays leave that group out
+        (default ``LASER_IGNORE_GROUP``: hidden from every laser with the default group).
     noise_free
         When true, ranges and intensities are exact (no bias, noise or dropout) and
         ``rng`` is never used.
@@ -141,6 +168,7 @@ class RaycastLaser:
         num_threads: int = 0,
         ignore_body_ids: tuple[int, ...] = (),
         noise_free: bool = False,
+        ignore_group: int = LASER_IGNORE_GROUP,
     ) -> None:
         if num_threads < 0:
             raise ValueError(f"RaycastLaser: num_threads must be >= 0 (0 = all), got {num_threads}")
@@ -151,7 +179,8 @@ class RaycastLaser:
         self.num_threads = int(num_threads)
         self.noise_free = bool(noise_free)
         for body in ignore_body_ids:
-            exclude_from_lasers(sim, body)
+            exclude_from_lasers(sim, body, ignore_group)
+        self.ray_mask = ~int(ignore_group)
         self.bias = (
             0.0 if noise_free else float(rng.uniform(-spec.range_bias_max, spec.range_bias_max))
         )
@@ -191,7 +220,7 @@ class RaycastLaser:
                 self._from,
                 self._to,
                 numThreads=self.num_threads,
-                collisionFilterMask=LASER_RAY_MASK,
+                collisionFilterMask=self.ray_mask,
             )
         finally:
             self.last_raycast_s = time.perf_counter() - start

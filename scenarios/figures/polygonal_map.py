@@ -119,6 +119,7 @@ def plot_polygonal_map(
     truth_outlines: Mapping[str, ArrayLike] | None = None,
     trajectory: ArrayLike | None = None,
     estimate: ArrayLike | None = None,
+    trajectories: Mapping[str, ArrayLike] | None = None,
     title: str = "",
 ) -> Path:
     """Draw the polygonal map over the world and the ground truth, as in Fig. 4 (b)/(d).
@@ -143,6 +144,8 @@ def plot_polygonal_map(
         Box name -> ``(4, 2)`` footprint corners where the box really stood.
     trajectory, estimate
         ``(N, 3)`` true and EKF poses ``(x, y, theta)`` (``(N, 2)`` positions also work).
+    trajectories
+        Vehicle name -> ``(N, 3)`` true poses: a fleet's vehicles, one colour each.
     title
         First line of the figure title, in place of the default that says what it shows.
 
@@ -183,6 +186,11 @@ got 'old'
         if poses is not None
     }
 
+    fleet = {
+        str(name): _poses(poses, f"trajectories[{name!r}]")
+        for name, poses in (trajectories or {}).items()
+    }
+
     fig = Figure(figsize=figure_size(world))
     ax = fig.subplots()
     draw_walls(ax, world.walls, color=MAP_COLORS["wall"])
@@ -210,6 +218,11 @@ got 'old'
     }
     for key, poses in tracks.items():
         (line,) = ax.plot(*poses[:, :2].T, lw=1.0, zorder=6, **track_styles[key])
+        ax.plot(*poses[0, :2], "o", color=line.get_color(), ms=5, zorder=6)
+        handles.append(line)
+    for index, (name, poses) in enumerate(fleet.items()):
+        (line,) = ax.plot(*poses[:, :2].T, lw=1.0, zorder=6, color=f"C{index % 10}",
+                          label=f"{name}: true trajectory")
         ax.plot(*poses[0, :2], "o", color=line.get_color(), ms=5, zorder=6)
         handles.append(line)
 

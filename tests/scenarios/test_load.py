@@ -64,7 +64,7 @@ def error_of(name_or_path, overrides=()) -> SpecError:
 
 def test_bundled_scenarios_are_the_table_1_rows():
     assert paper_scenarios() == tuple(sorted(PAPER_SCENARIOS))
-    assert bundled_scenarios() == (*paper_scenarios(), "warehouse")
+    assert bundled_scenarios() == (*paper_scenarios(), "warehouse", "warehouse_fleet")
 
 
 def test_bundled_scenario_loads_as_the_paper_ran_it(name):

@@ -18,11 +18,18 @@ from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, Worl
 
 
 def without_performance(metrics):
-    return {key: value for key, value in metrics.items() if key != "performance"}
+    kept = {key: value for key, value in metrics.items() if key != "performance"}
+    if "vehicles" in kept:  # a fleet: every vehicle's figures, its timings aside
+        kept["vehicles"] = {name: without_performance(vehicle)
+                            for name, vehicle in kept["vehicles"].items()}
+    return kept
 
 
 def assert_same_run(first, second):
     assert without_performance(summarize(first)) == without_performance(summarize(second))
+    assert first.vehicles.keys() == second.vehicles.keys()
+    for name, vehicle in first.vehicles.items():
+        assert vehicle.maps_after_lap == second.vehicles[name].maps_after_lap
     assert first.maps_after_lap == second.maps_after_lap
     assert first.table1_distances == second.table1_distances
     for name in ("stamps", "true_poses", "estimated_poses", "covariances"):
