@@ -223,7 +223,7 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
     return order, clockwise
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _key_less(keys, a, b):  # pragma: no cover - compiled
     for column in range(3):
         if keys[a, column] != keys[b, column]:
@@ -345,7 +345,10 @@ def _dtw_kernel(cost):  # pragma: no cover - compiled
             i -= 1
         else:
             j -= 1
-    return path[:size][::-1].copy(), totals
+    forward = np.empty((size, 2), np.int64)
+    for k in range(size):
+        forward[k] = path[size - 1 - k]
+    return forward, totals
 
 
 @numba.njit(cache=True)
@@ -527,9 +530,18 @@ def associate_with_distances(
 def _broad_phase(scan_boxes, map_boxes, gate):  # pragma: no cover - compiled
     """Return which pairs' boxes are within ``gate``, and the scan and map polylines in one."""
     near = _gap_kernel(scan_boxes, map_boxes) <= gate
-    rows = np.flatnonzero(near.sum(axis=1) > 0)
-    columns = np.flatnonzero(near.sum(axis=0) > 0)
-    return near, rows, columns
+    rows = np.empty(near.shape[0], np.int64)
+    columns = np.empty(near.shape[1], np.int64)
+    row_count, column_count = 0, 0
+    for a in range(near.shape[0]):
+        if near[a].any():
+            rows[row_count] = a
+            row_count += 1
+    for b in range(near.shape[1]):
+        if near[:, b].any():
+            columns[column_count] = b
+            column_count += 1
+    return near, rows[:row_count], columns[:column_count]
 
 
 @numba.njit(cache=True)
@@ -560,15 +572,15 @@ def _arranged(near, rows, columns, ranks, clockwise, points, bounds):  # pragma:
 @numba.njit(cache=True)
 def _gateable(path, feasible, scan_bounds, map_bounds):  # pragma: no cover - compiled
     """Return the pairs of ``path`` that can pass the gate (feasible, both non-empty)."""
-    keep = np.zeros(path.shape[0], np.bool_)
+    pairs = np.empty_like(path)
+    count = 0
     for k in range(path.shape[0]):
         a, b = path[k, 0], path[k, 1]
-        keep[k] = (
-            feasible[a, b]
-            and scan_bounds[a + 1] > scan_bounds[a]
-            and map_bounds[b + 1] > map_bounds[b]
-        )
-    return path[keep]
+        filled = scan_bounds[a + 1] > scan_bounds[a] and map_bounds[b + 1] > map_bounds[b]
+        if feasible[a, b] and filled:
+            pairs[count] = path[k]
+            count += 1
+    return pairs[:count]
 
 
 def associate(

@@ -251,11 +251,9 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
     distances = np.empty(pairs.shape[0])
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
+        # Leading-axis slices of C arrays stay C arrays: the same specialisation.
         distances[p] = _restricted_kernel(
-            np.ascontiguousarray(points0[bounds0[a] : bounds0[a + 1]]),
-            np.ascontiguousarray(points1[bounds1[b] : bounds1[b + 1]]),
-            mode,
-            limit,
+            points0[bounds0[a] : bounds0[a + 1]], points1[bounds1[b] : bounds1[b + 1]], mode, limit
         )
     return distances
 
@@ -285,7 +283,7 @@ def _segment_table(points):  # pragma: no cover - compiled
     return table
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _to_segment(px, py, table, k):  # pragma: no cover - compiled
     """Return ``(distance, t)`` from a point to segment ``k`` of ``table``.
 
@@ -313,7 +311,7 @@ def _distance_rows(points, table):  # pragma: no cover - compiled
     return rows
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _row_min(row, first, stop):  # pragma: no cover - compiled
     """Return the minimum of ``row[first:stop]`` and its first position (from ``first``)."""
     best = row[first]
@@ -410,17 +408,15 @@ def _restricted_kernel(points0, points1, mode, limit):  # pragma: no cover - com
     """
     if points0.shape[0] == 0 or points1.shape[0] == 0:
         return math.inf
+    cut0, cut1 = points0, points1
     if mode == 2:
         if points0.shape[0] >= 2:
             cut0, _ = _projection_cut(points0, points1)
-        else:
-            cut0 = points0
         if points1.shape[0] >= 2:
             cut1, _ = _projection_cut(points1, points0)
-        else:
-            cut1 = points1
-        return _branch_and_bound(cut0, cut1, False, limit)
-    return _branch_and_bound(points0, points1, mode == 1, limit)
+    # One call site with a run-time flag: a literal argument would compile the (large)
+    # branch and bound a second time, specialised on the literal.
+    return _branch_and_bound(cut0, cut1, mode == 1, limit)
 
 
 @numba.njit(cache=True)

@@ -112,17 +112,28 @@ def _integral_kernel(breaks0, angles0, breaks1, angles1):  # pragma: no cover - 
     # Between consecutive breakpoints of the union both step functions are constant; a
     # repeated breakpoint only adds an interval of zero width. On [u_k, u_k+1) edge j of a
     # polyline applies when j of its inner breaks are at or before u_k.
-    union = np.sort(np.concatenate((breaks0, breaks1)))
-    inner0, inner1 = breaks0[1:-1], breaks1[1:-1]
+    size0, size1 = breaks0.size, breaks1.size
+    union = np.empty(size0 + size1)
+    first, second = 0, 0
+    for k in range(union.size):  # merge the two sorted break lists
+        if second >= size1 or (first < size0 and breaks0[first] <= breaks1[second]):
+            union[k] = breaks0[first]
+            first += 1
+        else:
+            union[k] = breaks1[second]
+            second += 1
     count = union.size - 1
     widths = np.empty(count)
     differences = np.empty(count)
+    edge0, edge1 = 0, 0
     theta_0 = 0.0
     for k in range(count):
         at = union[k]
+        while edge0 < size0 - 2 and breaks0[edge0 + 1] <= at:
+            edge0 += 1
+        while edge1 < size1 - 2 and breaks1[edge1 + 1] <= at:
+            edge1 += 1
         widths[k] = union[k + 1] - at
-        edge0 = np.searchsorted(inner0, at, side="right")
-        edge1 = np.searchsorted(inner1, at, side="right")
         differences[k] = angles1[edge1] - angles0[edge0]
         theta_0 += widths[k] * differences[k]
     integral = 0.0
@@ -130,6 +141,7 @@ def _integral_kernel(breaks0, angles0, breaks1, angles1):  # pragma: no cover - 
         residual = differences[k] - theta_0
         integral += widths[k] * (residual * residual)
     return integral
+
 
 def tangent_function(polyline: Polyline | ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Return the tangent step function of a polyline over normalised arc length.
