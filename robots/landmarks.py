@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -50,6 +51,7 @@ __all__ = [
     "range_bearing_model",
     "range_bearing_rows",
 ]
+
 
 # 99% quantile of the chi-square distribution with 2 degrees of freedom
 # (scipy.stats.chi2.ppf(0.99, 2)): the default Mahalanobis gate of a range-bearing pair.
@@ -238,81 +240,90 @@ def detect_landmarks(
             "detect_landmarks: range_sigma and bearing_sigma must be >= 0, "
             f"got {range_sigma}, {bearing_sigma}"
         )
-    angles = beam_angles(scan.ranges.size, scan.angle_min, scan.angle_increment)
-    centres, bearings, covariances, firsts, lasts = _detect_kernel(
-        np.ascontiguousarray(scan.ranges, dtype=np.float64),
-        np.ascontiguousarray(scan.intensities, dtype=np.float64),
-        np.ascontiguousarray(angles),
-        float(scan.range_min),
-        float(scan.range_max),
-        float(scan.angle_increment),
-        float(intensity_threshold),
-        float(post_radius),
-        float(range_sigma),
-        float(bearing_sigma),
-        int(min_beams),
+    ranges = scan.ranges
+    angles = beam_angles(ranges.size, scan.angle_min, scan.angle_increment)
+    # Scan.valid_mask() without its errstate block (comparisons with nan do not warn).
+    valid = np.isfinite(ranges)
+    valid &= ranges >= scan.range_min
+    valid &= ranges <= scan.range_max
+    bright = valid & (scan.intensities >= intensity_threshold)
+    indices = np.flatnonzero(bright)
+    if indices.size == 0:
+        return []
+    max_jump = 2.0 * post_radius + 3.0 * range_sigma
+    hit_ranges = ranges[indices]
+    # A group starts at the first bright beam and after every gap or range jump.
+    first_of_group = np.empty(indices.size, dtype=bool)
+    first_of_group[0] = True
+    np.greater(indices[1:] - indices[:-1], 1, out=first_of_group[1:])
+    first_of_group[1:] |= np.abs(hit_ranges[1:] - hit_ranges[:-1]) > max_jump
+    starts = np.flatnonzero(first_of_group)
+    groups = _post_groups(
+        indices,
+        starts,
+        ranges,
+        angles,
+        valid,
+        scan.angle_increment,
+        post_radius,
+        range_sigma,
+        min_beams,
     )
-    return [
-        LandmarkObservation._trusted(centre, bearing, covariance, np.arange(first, last + 1))
-        for centre, bearing, covariance, first, last in zip(
-            centres.tolist(), bearings.tolist(), covariances, firsts.tolist(), lasts.tolist(),
-            strict=True,
-        )
-    ]
+    if not groups:
+        return []
+    return _posts_from_groups(groups, ranges, angles, post_radius, range_sigma, bearing_sigma)
 
 
-@numba.njit(cache=True)
-def _detect_kernel(
-    ranges, intensities, angles, range_min, range_max, increment, threshold, radius,
-    range_sigma, bearing_sigma, min_beams,
-):  # pragma: no cover - compiled
-    """Return the centres, bearings, ``(G, 2, 2)`` covariances and first and last beams.
+class _Group(NamedTuple):
+    """One group of bright beams that passed the shape checks of a post."""
 
-    One pass groups the bright beams and checks each group's shape (see
-    :func:`detect_landmarks`); each accepted group's centre is then estimated on its own.
+    beams: np.ndarray
+    distance: float  # first estimate of the centre distance: nearest return + radius, m
+    first_angle: float  # angles of the first and last bright beam
+    last_angle: float
+    low_miss: float  # angle of the missed beam before the group (the silhouette ends after it)
+    high_miss: float  # angle of the missed beam after the group
+
+
+def _post_groups(
+    indices: np.ndarray,
+    starts: np.ndarray,
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    valid: np.ndarray,
+    increment: float,
+    radius: float,
+    range_sigma: float,
+    min_beams: int,
+) -> list[_Group]:
+    """Return the groups of bright beams whose extent fits a post, in scan order.
+
+    A group starts at each position ``starts`` of ``indices`` (the bright beams).
     """
-    count = ranges.size
-    valid = np.empty(count, np.bool_)
-    for k in range(count):
-        valid[k] = math.isfinite(ranges[k]) and range_min <= ranges[k] <= range_max
-    max_jump = 2.0 * radius + 3.0 * range_sigma
-    # Groups as (first, last) beams: a group starts at the first bright beam and after
-    # every gap or range jump, so its beams are consecutive.
-    group_first = np.empty(count, np.int64)
-    group_last = np.empty(count, np.int64)
-    groups = 0
-    previous = -2
-    for k in range(count):
-        if not (valid[k] and intensities[k] >= threshold):
+    hit_ranges = ranges[indices]
+    # Per-group nearest and farthest return in one pass; the checks are then on floats.
+    nears = np.minimum.reduceat(hit_ranges, starts).tolist()
+    fars = np.maximum.reduceat(hit_ranges, starts).tolist()
+    stops = [*starts[1:].tolist(), indices.size]
+    firsts = indices[starts].tolist()
+    lasts = indices[np.asarray(stops) - 1].tolist()
+    last_beam = ranges.size - 1
+    groups = []
+    for start, stop, first, last, near, far in zip(
+        starts.tolist(), stops, firsts, lasts, nears, fars, strict=True
+    ):
+        if stop - start < min_beams:
             continue
-        if previous != k - 1 or abs(ranges[k] - ranges[previous]) > max_jump:
-            group_first[groups] = k
-            groups += 1
-        group_last[groups - 1] = k
-        previous = k
-    centres = np.empty(groups)
-    bearings = np.empty(groups)
-    covariances = np.empty((groups, 2, 2))
-    firsts = np.empty(groups, np.int64)
-    lasts = np.empty(groups, np.int64)
-    likelihood_sigma = max(range_sigma, _RANGE_SIGMA_FLOOR)
-    posts = 0
-    for g in range(groups):
-        first, last = group_first[g], group_last[g]
-        size = last - first + 1
-        if size < min_beams:
-            continue
-        if first == 0 or last == count - 1:
+        if first == 0 or last == last_beam:
             continue  # cut by the edge of the field of view: its centre is unknowable
-        near = ranges[first : last + 1].min()
-        far = ranges[first : last + 1].max()
         if far - near > radius + 3.0 * range_sigma:
             continue
         distance = near + radius
         half_width = math.asin(min(1.0, radius / distance))
-        if angles[last] - angles[first] > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
+        first_angle, last_angle = float(angles[first]), float(angles[last])
+        if last_angle - first_angle > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
             continue  # too wide for a post: a reflective strip, a shiny wall
-        if size < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
+        if stop - start < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
             continue  # too narrow: a post this close covers more beams (a speck, a glint)
         # A neighbour beam in front of the post hides part of it: the visible part's middle
         # is not the centre, and no honest small covariance exists, so the post is skipped.
@@ -322,122 +333,214 @@ def _detect_kernel(
             valid[after] and ranges[after] < occluder_limit
         ):
             continue
-        hit_ranges = ranges[first : last + 1]
-        hit_angles = angles[first : last + 1]
-        for _ in range(_CENTRE_ITERATIONS):
-            half_width = math.asin(min(1.0, radius / distance))
-            low = angles[last] - half_width
-            high = angles[first] + half_width
-            # The neighbouring beams missed the post: its silhouette ends before them.
-            low = max(low, angles[before] + half_width)
-            high = min(high, angles[after] - half_width)
-            if low > high:  # noise made the bounds cross: fall back to the hits alone
-                low = min(angles[last] - half_width, angles[first] + half_width)
-                high = max(angles[last] - half_width, angles[first] + half_width)
-            bearing, bearing_variance = _centre_bearing(
-                hit_ranges, hit_angles, low, high, radius, likelihood_sigma
+        groups.append(
+            _Group(
+                indices[start:stop],
+                distance,
+                first_angle,
+                last_angle,
+                float(angles[first - 1]),
+                float(angles[last + 1]),
             )
-            bearing_variance += bearing_sigma**2
-            distance, range_variance, cross = _centre_range(
-                hit_ranges, hit_angles - bearing, radius, range_sigma, bearing_variance
-            )
-        centres[posts] = distance
-        bearings[posts] = bearing
-        covariances[posts, 0, 0] = range_variance
-        covariances[posts, 0, 1] = cross
-        covariances[posts, 1, 0] = cross
-        covariances[posts, 1, 1] = bearing_variance
-        firsts[posts] = first
-        lasts[posts] = last
-        posts += 1
-    return centres[:posts], bearings[:posts], covariances[:posts], firsts[:posts], lasts[:posts]
+        )
+    return groups
 
 
-@numba.njit(cache=True)
-def _centre_bearing(ranges, angles, low, high, radius, range_sigma):  # pragma: no cover
-    """Return the posterior mean and variance of a post's centre bearing on ``[low, high]``.
+def _posts_from_groups(
+    groups: list[_Group],
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    radius: float,
+    range_sigma: float,
+    bearing_sigma: float,
+) -> list[LandmarkObservation]:
+    """Estimate the centre of every accepted group at once and return the observations.
 
-    The prior is uniform on the interval allowed by the hits and misses; the likelihood
-    of a candidate bearing compares the measured ranges with those of the circle (centre
-    distance profiled by least squares). With noisy ranges this stays near the middle of
-    the interval; with precise ranges it locks onto the true centre. An empty interval
-    (``low == high``) gives its point with zero variance.
+    The groups' beams are stacked into ``(G, B)`` arrays padded to the largest group
+    (``mask`` marks the real beams), so each estimation step is one numpy pass over all
+    posts of the scan rather than one per post.
     """
-    if not high > low:
-        return 0.5 * (low + high), 0.0
-    radius_sq = radius * radius
-    step = (high - low) / (_BEARING_CANDIDATES - 1)
-    candidates = np.empty(_BEARING_CANDIDATES)
-    misfits = np.empty(_BEARING_CANDIDATES)
-    # sin and cos of (beam angle - candidate) from the angle difference identities.
-    beam_sin, beam_cos = np.sin(angles), np.cos(angles)
-    for k in range(_BEARING_CANDIDATES):
-        candidate = k * step + low if k < _BEARING_CANDIDATES - 1 else high
-        candidates[k] = candidate
-        candidate_sin, candidate_cos = math.sin(candidate), math.cos(candidate)
-        # Centre distance for this candidate: the mean of the beams' own estimates.
-        total = 0.0
-        for b in range(ranges.size):
-            sine = beam_sin[b] * candidate_cos - beam_cos[b] * candidate_sin
-            cosine = beam_cos[b] * candidate_cos + beam_sin[b] * candidate_sin
-            across = ranges[b] * sine
-            total += math.sqrt(max(radius_sq - across * across, 0.0)) + ranges[b] * cosine
-        distance = total / ranges.size
-        misfit = 0.0
-        for b in range(ranges.size):
-            sine = beam_sin[b] * candidate_cos - beam_cos[b] * candidate_sin
-            cosine = beam_cos[b] * candidate_cos + beam_sin[b] * candidate_sin
-            across = distance * sine
-            expected = distance * cosine - math.sqrt(max(radius_sq - across * across, 0.0))
-            misfit += (ranges[b] - expected) ** 2
-        misfits[k] = misfit / range_sigma**2
-    weights = np.exp(-0.5 * (misfits - misfits.min()))
-    weights /= weights.sum()
-    mean = 0.0
-    for k in range(_BEARING_CANDIDATES):
-        mean += weights[k] * candidates[k]
-    variance = 0.0
-    for k in range(_BEARING_CANDIDATES):
-        variance += weights[k] * (candidates[k] - mean) ** 2
+    # A group's beams are consecutive: row g holds first_g, first_g + 1, ... and then
+    # repeats first_g, so padding is a real (finite) hit that the mask keeps out of sums.
+    firsts = np.array([int(group.beams[0]) for group in groups])
+    sizes = np.array([group.beams.size for group in groups])
+    offsets = np.arange(int(sizes.max()))
+    mask = offsets < sizes[:, None]
+    beams = firsts[:, None] + offsets * mask
+    hits = _Hits(ranges[beams], angles[beams], mask)
+    distance = [group.distance for group in groups]
+    likelihood_sigma = max(range_sigma, _RANGE_SIGMA_FLOOR)
+    for iteration in range(_CENTRE_ITERATIONS):
+        lows, highs = [], []
+        for group, centre in zip(groups, distance, strict=True):
+            half_width = math.asin(min(1.0, radius / centre))
+            low = group.last_angle - half_width
+            high = group.first_angle + half_width
+            # The neighbouring beams missed the post: its silhouette ends before them.
+            low = max(low, group.low_miss + half_width)
+            high = min(high, group.high_miss - half_width)
+            if low > high:  # noise made the bounds cross: fall back to the hits alone
+                low, high = sorted((group.last_angle - half_width, group.first_angle + half_width))
+            lows.append(low)
+            highs.append(high)
+        bearing, bearing_variance = _centre_bearings(
+            hits, np.array(lows), np.array(highs), radius, likelihood_sigma
+        )
+        bearing_variance = bearing_variance + bearing_sigma**2
+        # Only the last round's range variance and cross term are reported.
+        distance, range_variance, cross = _centre_ranges(
+            hits,
+            bearing,
+            radius,
+            range_sigma,
+            bearing_variance,
+            variances=iteration == _CENTRE_ITERATIONS - 1,
+        )
+        distance = distance.tolist()
+    return [
+        LandmarkObservation._trusted(
+            centre, direction, np.array([[r_var, c], [c, b_var]]), group.beams
+        )
+        for group, centre, direction, r_var, c, b_var in zip(
+            groups,
+            distance,
+            bearing.tolist(),
+            range_variance.tolist(),
+            cross.tolist(),
+            bearing_variance.tolist(),
+            strict=True,
+        )
+    ]
+
+
+class _Hits:
+    """The bright beams of G groups as padded ``(G, B)`` arrays, with what both passes reuse.
+
+    ``mask`` marks real beams; padded entries repeat a real hit, so every value stays
+    finite and multiplying by the 0/1 ``weight`` removes them from sums exactly.
+
+    """
+
+    def __init__(self, ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray) -> None:
+        self.ranges, self.angles, self.mask = ranges, angles, mask
+        self.weight = mask.astype(float)
+        self.count = mask.sum(axis=1)
+        # (G, B, 1) views for the (G, B, candidates) arrays of the bearing likelihood.
+        self.ranges_3d = ranges[:, :, None]
+        self.weight_3d = self.weight[:, :, None]
+        self.count_3d = self.count[:, None, None]
+        self.sin_3d = np.sin(angles)[:, :, None]
+        self.cos_3d = np.cos(angles)[:, :, None]
+
+
+# The candidate grid of numpy.linspace(low, high, n): ramp * step + low, then the end.
+# (linspace's special case for a step that underflows to 0 only matters for intervals
+# below 1e-320 rad, which round to a point either way.)
+_RAMP = np.arange(_BEARING_CANDIDATES, dtype=float)
+
+
+def _centre_bearings(
+    hits: _Hits,
+    low: np.ndarray,
+    high: np.ndarray,
+    radius: float,
+    range_sigma: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the posterior mean and variance of each centre bearing on ``[low, high]``.
+
+    Row ``g`` is one post. The prior is uniform on the interval allowed by the hits and
+    misses; the likelihood of a candidate bearing compares the measured ranges with
+    those of the circle (centre distance profiled by least squares). With noisy ranges
+    this stays near the middle of the interval; with precise ranges it locks onto the
+    true centre. An empty interval (``low == high``) gives its point with zero variance.
+    """
+    candidates = _RAMP * ((high - low) / (_BEARING_CANDIDATES - 1))[:, None]
+    candidates += low[:, None]
+    candidates[:, -1] = high
+    # Arrays are (G, beams, candidates): the candidates, the longest axis, vary fastest.
+    # sin and cos of (beam angle - candidate) come from the angle difference identities:
+    # (G, B) + (G, candidates) evaluations instead of full (G, B, candidates) ones (the
+    # bulk of the work otherwise); they agree with the direct ones to ~1e-16.
+    candidate_sin = np.sin(candidates)[:, None, :]
+    candidate_cos = np.cos(candidates)[:, None, :]
+    # The expressions of the docstring, evaluated in place into few (G, B, candidates)
+    # buffers: the same operations in the same order, fewer temporaries.
+    sine = hits.sin_3d * candidate_cos
+    sine -= hits.cos_3d * candidate_sin
+    cosine = hits.cos_3d * candidate_cos
+    cosine += hits.sin_3d * candidate_sin
+    ranges, weight, radius_sq = hits.ranges_3d, hits.weight_3d, radius * radius
+    work = np.multiply(ranges, sine)
+    work *= work
+    np.subtract(radius_sq, work, out=work)
+    np.maximum(work, 0.0, out=work)
+    np.sqrt(work, out=work)  # the half chord of each beam
+    # Centre distance for each candidate: the mean of the beams' individual estimates.
+    work += ranges * cosine
+    work *= weight
+    distance = work.sum(axis=1, keepdims=True)
+    distance /= hits.count_3d
+    np.multiply(distance, sine, out=work)
+    work *= work
+    np.subtract(radius_sq, work, out=work)
+    np.maximum(work, 0.0, out=work)
+    np.sqrt(work, out=work)
+    np.subtract(distance * cosine, work, out=work)  # the expected ranges
+    np.subtract(ranges, work, out=work)
+    work *= work
+    work *= weight
+    misfit = work.sum(axis=1)
+    misfit /= range_sigma**2
+    weights = np.exp(-0.5 * (misfit - misfit.min(axis=1, keepdims=True)))
+    weights /= weights.sum(axis=1, keepdims=True)
+    mean = np.einsum("gk,gk->g", weights, candidates)
+    variance = np.einsum("gk,gk->g", weights, (candidates - mean[:, None]) ** 2)
+    empty = ~(high > low)
+    if empty.any():
+        mean[empty], variance[empty] = 0.5 * (low[empty] + high[empty]), 0.0
     return mean, variance
 
 
-@numba.njit(cache=True)
-def _centre_range(ranges, offsets, radius, range_sigma, bearing_variance):  # pragma: no cover
-    """Return a post's centre distance, its variance and its covariance with the bearing.
+def _centre_ranges(
+    hits: _Hits,
+    bearing: np.ndarray,
+    radius: float,
+    range_sigma: float,
+    bearing_variance: np.ndarray,
+    *,
+    variances: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Return each centre distance, its variance and its covariance with the bearing.
 
-    Each beam at angular offset ``delta`` from the centre direction, hitting at range
-    ``r``, puts the centre at ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near
-    the post's silhouette are very sensitive to the range noise and to the bearing error
-    (the square root's slope diverges there), so the beams are averaged with
-    inverse-variance weights from first-order propagation of both.
+    With ``variances=False`` only the distance is computed (the other two are ``None``).
+
+    Row ``g`` is one post seen in direction ``bearing[g]``. Each beam at angular offset
+    ``delta`` from the centre direction, hitting at range ``r``, puts the centre at
+    ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near the post's silhouette are
+    very sensitive to the range noise and to the bearing error (the square root's slope
+    diverges there), so the beams are averaged with inverse-variance weights from
+    first-order propagation of both.
     """
-    count = ranges.size
-    along = np.empty(count)
-    slope_range = np.empty(count)
-    slope_bearing = np.empty(count)
-    weights = np.empty(count)
-    for b in range(count):
-        sine, cosine = math.sin(offsets[b]), math.cos(offsets[b])
-        across_sq = (ranges[b] * sine) ** 2
-        along[b] = ranges[b] * cosine + math.sqrt(max(radius**2 - across_sq, 0.0))
-        # Keep the square root away from 0, where the slopes diverge (grazing beams).
-        depth = math.sqrt(max(radius**2 - across_sq, (_GRAZING_DEPTH * radius) ** 2))
-        slope_range[b] = cosine - ranges[b] * sine**2 / depth
-        slope_bearing[b] = ranges[b] * sine + ranges[b] ** 2 * sine * cosine / depth
-        variance = range_sigma**2 * slope_range[b] ** 2 + bearing_variance * slope_bearing[b] ** 2
-        weights[b] = 1.0 / max(variance, _MIN_RANGE_VARIANCE)
-    weights /= weights.sum()
+    hit_ranges = hits.ranges
+    offsets = hits.angles - bearing[:, None]
+    sine, cosine = np.sin(offsets), np.cos(offsets)
+    across_sq = (hit_ranges * sine) ** 2
+    # Keep the square root away from 0, where the slopes diverge (grazing beams).
+    along = hit_ranges * cosine + np.sqrt(np.maximum(radius**2 - across_sq, 0.0))
+    depth = np.sqrt(np.maximum(radius**2 - across_sq, (_GRAZING_DEPTH * radius) ** 2))
+    slope_range = cosine - hit_ranges * sine**2 / depth
+    slope_bearing = hit_ranges * sine + hit_ranges**2 * sine * cosine / depth
+    variance = range_sigma**2 * slope_range**2 + bearing_variance[:, None] * slope_bearing**2
+    weights = hits.weight / np.maximum(variance, _MIN_RANGE_VARIANCE)
+    weights /= weights.sum(axis=1, keepdims=True)
+    if not variances:
+        return np.einsum("gb,gb->g", weights, along), None, None
     # The range noise is independent per beam; the bearing error is shared by all beams,
     # so it enters coherently and also correlates the range with the bearing estimate.
-    distance = 0.0
-    coupling = 0.0
-    range_variance = 0.0
-    for b in range(count):
-        distance += weights[b] * along[b]
-        coupling += weights[b] * slope_bearing[b]
-        range_variance += weights[b] ** 2 * slope_range[b] ** 2
-    range_variance = range_variance * range_sigma**2 + coupling**2 * bearing_variance
+    coupling = np.einsum("gb,gb->g", weights, slope_bearing)
+    range_variance = np.einsum("gb,gb->g", weights**2, slope_range**2) * range_sigma**2
+    range_variance += coupling**2 * bearing_variance
+    distance = np.einsum("gb,gb->g", weights, along)
     return distance, range_variance, coupling * bearing_variance
 
 

@@ -438,30 +438,46 @@ def test_min_beams_and_an_empty_bearing_interval_match_the_reference():
     assert len(detect_landmarks(scan, min_beams=1)) > len(detect_landmarks(scan, min_beams=5))
 
 
-def test_bearing_and_range_kernels_match_the_reference_on_groups_of_any_size():
-    # Groups of 1 to 17 beams, one with an empty interval.
+def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_groups():
+    # Groups of 1 to 17 beams in one batch (padding), one with an empty interval.
     rng = np.random.default_rng(9)
     sizes = [1, 3, 17, 6, 2]
-    for row, size in enumerate(sizes):
+    hit_ranges, hit_angles = [], []
+    for size in sizes:
         centre = rng.uniform(-2.0, 2.0)
-        hit_angles = centre + 0.008 * (np.arange(size) - (size - 1) / 2)
-        hit_ranges = rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size)
-        low = hit_angles[-1] - 0.01
-        high = low if row == 3 else low + rng.uniform(0.0, 0.02)  # row 3: a point
-        bearing, bearing_variance = landmarks_module._centre_bearing(
-            hit_ranges, hit_angles, low, high, POST_RADIUS, 0.012
-        )
+        hit_angles.append(centre + 0.008 * (np.arange(size) - (size - 1) / 2))
+        hit_ranges.append(rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size))
+    lows = np.array([angles[-1] - 0.01 for angles in hit_angles])
+    highs = lows + rng.uniform(0.0, 0.02, len(sizes))
+    highs[3] = lows[3]  # an interval that collapsed to a point
+    mask = np.zeros((len(sizes), max(sizes)), dtype=bool)
+    ranges = np.ones(mask.shape)
+    angles = np.zeros(mask.shape)
+    for row, size in enumerate(sizes):
+        mask[row, :size] = True
+        ranges[row, :size], angles[row, :size] = hit_ranges[row], hit_angles[row]
+    hits = landmarks_module._Hits(ranges, angles, mask)
+    bearing, bearing_variance = landmarks_module._centre_bearings(
+        hits, lows, highs, POST_RADIUS, 0.012
+    )
+    distance, range_variance, cross = landmarks_module._centre_ranges(
+        hits, bearing, POST_RADIUS, 0.012, bearing_variance + 1e-6
+    )
+    for row in range(len(sizes)):
         mean, variance = reference_centre_bearing(
-            hit_ranges, hit_angles, low, high, POST_RADIUS, 0.012
+            hit_ranges[row], hit_angles[row], lows[row], highs[row], POST_RADIUS, 0.012
         )
-        assert bearing == pytest.approx(mean, rel=0, abs=1e-12)
-        assert bearing_variance == pytest.approx(variance, rel=1e-9, abs=1e-18)
-        if row == 3:
-            assert (bearing, bearing_variance) == (low, 0.0)
-        result = landmarks_module._centre_range(
-            hit_ranges, hit_angles - bearing, POST_RADIUS, 0.012, bearing_variance + 1e-6
-        )
+        assert bearing[row] == pytest.approx(mean, rel=0, abs=1e-12)
+        assert bearing_variance[row] == pytest.approx(variance, rel=1e-9, abs=1e-18)
         expected = reference_centre_range(
-            hit_ranges, hit_angles - bearing, POST_RADIUS, 0.012, bearing_variance + 1e-6
+            hit_ranges[row],
+            hit_angles[row] - bearing[row],
+            POST_RADIUS,
+            0.012,
+            bearing_variance[row] + 1e-6,
         )
-        assert result == pytest.approx(expected, rel=1e-11)
+        assert (distance[row], range_variance[row], cross[row]) == pytest.approx(
+            expected, rel=1e-11
+        )
+    assert bearing_variance[3] == 0.0
+    assert bearing[3] == lows[3]
