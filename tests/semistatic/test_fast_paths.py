@@ -1,11 +1,11 @@
-"""The Python-float fast paths give what the vectorised paths give.
+"""The remaining fast paths give what the slow paths give.
 
-Small polylines (a handful of vertices, the common case in a mapper update) go through
-plain-Python twins of the numpy code in ``hausdorff``, ``similarity``, ``extraction``
-(Douglas-Peucker) and ``merge``. Each twin is checked here against its vectorised or GEOS
-counterpart on seeded random inputs, and the whole mapper against itself with every fast
-path switched off. So is the association's shortcut past the similarities when the gate
-alone fixes the optimal path.
+Small polylines go through plain-Python twins of the Douglas-Peucker code in
+``extraction`` and ``merge``; each twin is checked here against GEOS on seeded random
+inputs, and the whole mapper against itself with those fast paths and the association's
+shortcut past the similarities (when the gate alone fixes the optimal path) switched off.
+(``hausdorff``, ``similarity`` and ``association`` have one compiled implementation each,
+tested against their references in their own test modules.)
 """
 
 from __future__ import annotations
