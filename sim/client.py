@@ -6,13 +6,10 @@ with its implicit client 0), so several simulations can live side by side in one
 process - the determinism tests run two of them.
 
 Time is fixed-step: ``step(n)`` advances the simulation by ``n * time_step`` seconds and
-``sim_time`` counts them. ``n`` steps take ONE engine call (``n`` sub-steps of
-``time_step`` each, Bullet's own fixed-step loop): the same states to the last bit as ``n``
-single steps (gravity and motor targets hold across sub-steps), without ``n`` round trips
-through Python and the client-server command queue. The wall time spent inside PyBullet
-is accumulated in ``engine_time_s``: stepping always, and other heavy calls (ray casts)
-when made inside ``with sim.engine_timer():``. A run's report compares it to the total
-wall time to show that the engine, not our Python, dominates.
+``sim_time`` counts them. The wall time spent inside PyBullet is accumulated in
+``engine_time_s``: stepping always, and other heavy calls (ray casts) when made inside
+``with sim.engine_timer():``. A run's report compares it to the total wall time to show
+that the engine, not our Python, dominates.
 
 Examples
 --------
@@ -131,7 +128,6 @@ class SimClient:
         self.time_step = float(time_step)
         self.engine_time_s = 0.0
         self._steps = 0
-        self._substeps = 1  # physics steps per stepSimulation call, see step()
         self._closed = False
         with quiet_stdout():
             self.bullet = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
@@ -172,34 +168,22 @@ class SimClient:
         return self._closed
 
     def step(self, n: int = 1) -> None:
-        """Advance the simulation by ``n`` fixed steps in one engine call, timing the engine.
-
-        Nothing of ours runs between the ``n`` steps (no sensor, control or contact check):
-        call it with ``n > 1`` only where none is due.
+        """Advance the simulation by ``n`` fixed steps, timing the engine.
 
         Examples
         --------
         >>> with SimClient() as sim:
         ...     sim.step(0)
-        ...     sim.step(5)
         ...     sim.steps
-        5
+        0
         """
         if n < 0:
             raise ValueError(f"SimClient.step: n must be >= 0 (got {n})")
         self._require_open()
-        if n == 0:
-            return
+        step_simulation = self._step_simulation
         start = time.perf_counter()
-        if n != self._substeps:
-            # Bullet then runs n sub-steps of time_step per stepSimulation. The setting
-            # stays until the batch size changes, so a run of equal batches (or of single
-            # steps) costs one call each.
-            self.bullet.setPhysicsEngineParameter(
-                fixedTimeStep=n * self.time_step, numSubSteps=n if n > 1 else 0
-            )
-            self._substeps = n
-        self._step_simulation()
+        for _ in range(n):
+            step_simulation()
         self.engine_time_s += time.perf_counter() - start
         self._steps += n
 

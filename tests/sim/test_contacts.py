@@ -102,33 +102,3 @@ def test_negative_separation_time_is_rejected(setup):
     sim, world, robot = setup
     with pytest.raises(ValueError, match="separation_time"):
         ContactMonitor(sim, robot, world, separation_time=-1.0)
-
-
-def test_batched_steps_give_the_same_states_and_still_catch_the_box(setup):
-    # One engine call per batch of steps (sub-steps), checking contacts only between
-    # batches: the body ends where single steps put it, and the push is still caught.
-    sim, world, robot = setup
-    monitor = ContactMonitor(sim, robot, world)
-    with SimClient() as single_sim:
-        single_world = SimWorld(single_sim, arena())
-        bullet = single_sim.bullet
-        single = bullet.createMultiBody(
-            5.0, bullet.createCollisionShape(bullet.GEOM_BOX, halfExtents=[HALF] * 3), -1,
-            [0.0, 0.0, HALF],
-        )
-        single_monitor = ContactMonitor(single_sim, single, single_world)
-        for batch in [1, 4, 5, 4, 5, 3] * 30:  # 3.3 s at 1 m/s: 1.2 m to the crate, then push
-            sim.bullet.resetBaseVelocity(robot, [1.0, 0.0, 0.0], [0.0, 0.0, 0.0])
-            sim.step(batch)
-            monitor.check()
-            # The same input (set at each batch start), stepped one step per call.
-            bullet.resetBaseVelocity(single, [1.0, 0.0, 0.0], [0.0, 0.0, 0.0])
-            for _ in range(batch):
-                single_sim.step()
-                single_monitor.check()
-        assert sim.steps == single_sim.steps
-        assert sim.bullet.getBasePositionAndOrientation(robot) == (
-            bullet.getBasePositionAndOrientation(single)
-        )
-    assert monitor.collisions == single_monitor.collisions == 1
-    assert monitor.events[0].name == "crate"
