@@ -2,14 +2,12 @@
 
 One 541-beam scan (270 deg, 0.5 deg, 1 cm noise) of 14 boxes and 6 wall panels around
 the sensor against a map of their 20 polylines, built from the first scans. Prints the
-median per update and the split by stage, with the Python-float fast paths for small
-polylines and again in the same run without them. Run with
+median per update and the split by stage. Run with
 ``.venv/bin/python -m pytest -m bench benchmarks/test_bench_mapper.py -s``.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
 
@@ -18,11 +16,6 @@ import pytest
 
 from semistatic.mapper import PolylineMap
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
-
-# The package re-exports functions named like these modules: import the modules by name.
-hausdorff_module = importlib.import_module("semistatic.hausdorff")
-similarity_module = importlib.import_module("semistatic.similarity")
-merge_module = importlib.import_module("semistatic.merge")
 
 SCANS = 300
 STAGES = ("extract", "associate", "merge", "join", "life_cycle")
@@ -76,7 +69,7 @@ def _summary(label, totals, stages):
 
 
 @pytest.mark.bench
-def test_mapper_update_time(monkeypatch):
+def test_mapper_update_time():
     rng = np.random.default_rng(0)
     segments = hall()
     base = np.zeros(3)
@@ -87,18 +80,9 @@ def test_mapper_update_time(monkeypatch):
         for k, pose in enumerate(poses)
     ]
     polylines, report, totals, stages = _measure(scans, poses)
-    # The same run with the Python-float fast paths off (numpy branch and bound, numpy
-    # tangent functions, GEOS for every merge simplification): what they buy.
-    monkeypatch.setattr(hausdorff_module, "PYTHON_PAIRS", 0)
-    monkeypatch.setattr(similarity_module, "PYTHON_VERTICES", 0)
-    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
-    _, _, slow_totals, slow_stages = _measure(scans, poses)
     print(
         f"\nmapper update, {polylines} map polylines, {len(report.scan_polylines)} scan "
-        f"polylines, {len(report.associated)} pairs\n"
-        + _summary("fast paths", totals, stages)
-        + "\n"
-        + _summary("vectorised paths only", slow_totals, slow_stages)
+        f"polylines, {len(report.associated)} pairs\n" + _summary("mapper", totals, stages)
     )
     assert polylines == 20
     assert math.isfinite(float(np.median(totals)))

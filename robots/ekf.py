@@ -61,9 +61,9 @@ from numpy.typing import ArrayLike
 from robots.landmarks import (
     CHI2_2DOF_99,
     LandmarkObservation,
-    _mahalanobis_rows,
-    _range_bearing_rows,
+    mahalanobis_rows,
     pairs_inside_gate,
+    range_bearing_rows,
 )
 from robots.triangulation import DEFAULT_MIN_RELIABILITY, TriangulationError, triangulate
 from semistatic.errors import MEMORY, SpecError
@@ -342,6 +342,7 @@ class EKFLocalizer:
             self.landmarks[:, None, :] - self.landmarks[None, :, :], axis=-1
         )
         self._mount = np.array(self.params.mount)
+        self._mount_floats = tuple(float(v) for v in self.params.mount)
         # The landmark coordinates as the per-update range-bearing model takes them.
         self._landmark_x = np.ascontiguousarray(self.landmarks[:, 0])
         self._landmark_y = np.ascontiguousarray(self.landmarks[:, 1])
@@ -501,8 +502,8 @@ class EKFLocalizer:
             return []
         prior = self._filter.x[:3, 0].copy()
         x, y, theta = prior.tolist()
-        predicted, jacobians = _range_bearing_rows(
-            x, y, theta, self.params.mount, self._landmark_x, self._landmark_y, self._dim
+        predicted, jacobians = range_bearing_rows(
+            x, y, theta, *self._mount_floats, self._landmark_x, self._landmark_y, self._dim
         )
         if self._has_bias:
             # range = |post - sensor| + b: d(range)/db = 1, d(bearing)/db = 0.
@@ -511,7 +512,9 @@ class EKFLocalizer:
         # Every observation's measurement and noise, stacked once for the gate and the update.
         measured_all = np.array([(obs.range, obs.bearing) for obs in observations])
         noise_all = np.array([obs.covariance for obs in observations])
-        nis = _mahalanobis_rows(measured_all, noise_all, predicted, jacobians, self._filter.P)
+        nis = mahalanobis_rows(
+            measured_all, noise_all, predicted, jacobians, np.ascontiguousarray(self._filter.P)
+        )
         pairs = pairs_inside_gate(nis, self.params.nis_gate)
         if not pairs:
             return []

@@ -32,11 +32,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from robots.lasers import POST_INTENSITY_THRESHOLD
-from semistatic.frames import wrap_angle
+from semistatic.frames import wrap_angle, wrap_angle_compiled
 from semistatic.types import Scan, beam_angles
 
 __all__ = [
@@ -45,11 +46,12 @@ __all__ = [
     "associate_landmarks",
     "detect_landmarks",
     "mahalanobis_matrix",
+    "mahalanobis_rows",
     "pairs_inside_gate",
     "range_bearing_model",
+    "range_bearing_rows",
 ]
 
-_TWO_PI = 2.0 * math.pi
 
 # 99% quantile of the chi-square distribution with 2 degrees of freedom
 # (scipy.stats.chi2.ppf(0.99, 2)): the default Mahalanobis gate of a range-bearing pair.
@@ -578,57 +580,52 @@ def range_bearing_model(
     x, y, theta = (float(v) for v in np.asarray(pose, dtype=float)[:3])
     mount_x, mount_y, mount_yaw = (float(v) for v in np.asarray(mount, dtype=float)[:3])
     points = np.asarray(landmarks, dtype=float).reshape(-1, 2)
-    return _range_bearing_rows(
-        x, y, theta, (mount_x, mount_y, mount_yaw), points[:, 0], points[:, 1], 3
+    return range_bearing_rows(
+        x, y, theta, mount_x, mount_y, mount_yaw,
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), 3,
     )
 
 
-def _range_bearing_rows(
-    x: float,
-    y: float,
-    theta: float,
-    mount: tuple[float, float, float],
-    landmark_x: np.ndarray,
-    landmark_y: np.ndarray,
-    columns: int,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``range_bearing_model`` for a pose and a mount given as floats.
+@numba.njit(cache=True)
+def range_bearing_rows(
+    x, y, theta, mount_x, mount_y, mount_yaw, landmark_x, landmark_y, columns
+):  # pragma: no cover - compiled
+    """Return :func:`range_bearing_model` for a pose and a mount given as floats.
 
-    The EKF calls this at every update with its landmark coordinates split once, so
-    nothing is converted or validated per call. ``columns`` (>= 3) is the width of the
-    state the Jacobians are taken against; columns past the pose are left zero.
+    The EKF calls this at every update with its landmark coordinates split once into
+    float64 arrays, so nothing is converted or validated per call. ``columns`` (>= 3) is
+    the width of the state the Jacobians are taken against; columns past the pose are 0.
+
+    Examples
+    --------
+    >>> z, H = range_bearing_rows(0.0, 0.0, 0.0, 0.5, 0.0, 0.0, np.array([2.0]),
+    ...                           np.array([0.0]), 4)
+    >>> z.round(6), H.shape
+    (array([[1.5, 0. ]]), (1, 2, 4))
     """
-    mount_x, mount_y, mount_yaw = mount
     c, s = math.cos(theta), math.sin(theta)
     sensor_x = x + c * mount_x - s * mount_y
     sensor_y = y + s * mount_x + c * mount_y
     # Derivatives of the sensor position with respect to the robot heading.
     dsx_dtheta = -s * mount_x - c * mount_y
     dsy_dtheta = c * mount_x - s * mount_y
-    dx = landmark_x - sensor_x
-    dy = landmark_y - sensor_y
-    range_sq = dx * dx + dy * dy
-    distance = np.sqrt(range_sq)
-    count = distance.size
+    count = landmark_x.size
     predicted = np.empty((count, 2))
-    predicted[:, 0] = distance
-    predicted[:, 1] = _wrap_angles(np.arctan2(dy, dx) - theta - mount_yaw)
-    jacobians = np.zeros((count, 2, columns)) if columns > 3 else np.empty((count, 2, 3))
-    jacobians[:, 0, 0] = -dx / distance
-    jacobians[:, 0, 1] = -dy / distance
-    jacobians[:, 0, 2] = -(dx * dsx_dtheta + dy * dsy_dtheta) / distance
-    jacobians[:, 1, 0] = dy / range_sq
-    jacobians[:, 1, 1] = -dx / range_sq
-    jacobians[:, 1, 2] = (dy * dsx_dtheta - dx * dsy_dtheta) / range_sq - 1.0
+    jacobians = np.zeros((count, 2, columns))
+    for m in range(count):
+        dx = landmark_x[m] - sensor_x
+        dy = landmark_y[m] - sensor_y
+        range_sq = dx * dx + dy * dy
+        distance = math.sqrt(range_sq)
+        predicted[m, 0] = distance
+        predicted[m, 1] = wrap_angle_compiled(math.atan2(dy, dx) - theta - mount_yaw)
+        jacobians[m, 0, 0] = -dx / distance
+        jacobians[m, 0, 1] = -dy / distance
+        jacobians[m, 0, 2] = -(dx * dsx_dtheta + dy * dsy_dtheta) / distance
+        jacobians[m, 1, 0] = dy / range_sq
+        jacobians[m, 1, 1] = -dx / range_sq
+        jacobians[m, 1, 2] = (dy * dsx_dtheta - dx * dsy_dtheta) / range_sq - 1.0
     return predicted, jacobians
-
-
-def _wrap_angles(angles: np.ndarray) -> np.ndarray:
-    """Return a float array wrapped to ``(-pi, pi]``: ``wrap_angle``'s array path, in place."""
-    wrapped = np.mod(math.pi - angles, _TWO_PI)
-    np.subtract(math.pi, wrapped, out=wrapped)
-    wrapped[wrapped == -math.pi] = math.pi
-    return wrapped
 
 
 def mahalanobis_matrix(
@@ -655,34 +652,52 @@ def mahalanobis_matrix(
         return np.zeros((count, predicted.shape[0]))
     measured = np.array([(obs.range, obs.bearing) for obs in observations])
     noise = np.array([obs.covariance for obs in observations])
-    return _mahalanobis_rows(
-        measured, noise, predicted, jacobians, np.asarray(robot_cov, dtype=float)
+    return mahalanobis_rows(
+        measured,
+        noise,
+        np.ascontiguousarray(predicted, dtype=np.float64),
+        np.ascontiguousarray(jacobians, dtype=np.float64),
+        np.ascontiguousarray(robot_cov, dtype=np.float64),
     )
 
 
-def _mahalanobis_rows(
-    measured: np.ndarray,
-    noise: np.ndarray,
-    predicted: np.ndarray,
-    jacobians: np.ndarray,
-    robot_cov: np.ndarray,
-) -> np.ndarray:
-    """Return ``mahalanobis_matrix`` for ``(K, 2)`` measurements and ``(K, 2, 2)`` noises.
+@numba.njit(cache=True)
+def mahalanobis_rows(measured, noise, predicted, jacobians, robot_cov):  # pragma: no cover
+    """Return :func:`mahalanobis_matrix` for ``(K, 2)`` measurements and ``(K, 2, 2)`` noises.
 
-    The EKF's entry point: it stacks the observations once per update and reuses them.
+    The EKF's entry point: it stacks the observations once per update. ``jacobians`` are
+    ``(M, 2, D)`` against a state of ``D`` columns with the ``(D, D)`` covariance.
+
+    Examples
+    --------
+    >>> z, H = range_bearing_model([0.0, 0.0, 0.0], [[2.0, 0.0]])
+    >>> mahalanobis_rows(np.array([[2.1, 0.0]]), np.diag([0.01, 1e-4])[None], z, H,
+    ...                  np.zeros((3, 3))).round(6)
+    array([[1.]])
     """
-    # H P Hᵀ for every landmark, then add each observation's own noise: (K, M, 2, 2).
-    projected = np.einsum("mij,jk,mlk->mil", jacobians, robot_cov, jacobians)
-    innovation_cov = projected[None, :, :, :] + noise[:, None, :, :]
-    innovation = measured[:, None, :] - predicted[None, :, :]
-    innovation[..., 1] = _wrap_angles(innovation[..., 1])
-    a = innovation_cov[..., 0, 0]
-    b = innovation_cov[..., 0, 1]
-    c = innovation_cov[..., 1, 0]
-    d = innovation_cov[..., 1, 1]
-    determinant = a * d - b * c
-    u, v = innovation[..., 0], innovation[..., 1]
-    return (d * u * u - (b + c) * u * v + a * v * v) / determinant
+    count, landmarks, columns = measured.shape[0], predicted.shape[0], robot_cov.shape[0]
+    distances = np.empty((count, landmarks))
+    for m in range(landmarks):
+        # H P Hᵀ of this landmark.
+        projected = np.zeros((2, 2))
+        for i in range(2):
+            for j in range(2):
+                total = 0.0
+                for a in range(columns):
+                    row = 0.0
+                    for b in range(columns):
+                        row += robot_cov[a, b] * jacobians[m, j, b]
+                    total += jacobians[m, i, a] * row
+                projected[i, j] = total
+        for k in range(count):
+            a = projected[0, 0] + noise[k, 0, 0]
+            b = projected[0, 1] + noise[k, 0, 1]
+            c = projected[1, 0] + noise[k, 1, 0]
+            d = projected[1, 1] + noise[k, 1, 1]
+            u = measured[k, 0] - predicted[m, 0]
+            v = wrap_angle_compiled(measured[k, 1] - predicted[m, 1])
+            distances[k, m] = (d * u * u - (b + c) * u * v + a * v * v) / (a * d - b * c)
+    return distances
 
 
 def associate_landmarks(

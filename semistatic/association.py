@@ -31,6 +31,9 @@ the optimal path (each polyline near only its own counterpart): then no similari
 computed at all (:func:`_forced_path` proves it with a bound on the similarities), and
 the validation stops each restricted Hausdorff distance as soon as it exceeds the gate.
 
+The broad phase (box gaps), the counter-clockwise order, the recursion and the validation
+of all pairs each run in one compiled kernel (numba) per update.
+
 Examples
 --------
 >>> wall = np.array([[2.0, -1.0], [2.0, 1.0]])
@@ -43,15 +46,15 @@ Examples
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.frames import wrap_angle
-from semistatic.hausdorff import _restricted_distance
+from semistatic.frames import wrap_angle_compiled
+from semistatic.hausdorff import pairwise_restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.similarity import similarity
 
@@ -72,13 +75,6 @@ __all__ = [
 # few tens, so any such pair is cheaper than one unvalidatable pair.
 FAR_COST = 1.0e6
 
-# Up to this many vertices in all, the polylines' bearings are summarised with Python floats
-# (a few microseconds) rather than in about twenty numpy calls.
-PYTHON_CCW_VERTICES = 24
-
-# Up to this many scan x map pairs, box gaps are found with Python floats, not numpy.
-PYTHON_BOX_PAIRS = 64
-
 
 def bounding_boxes(polylines: Sequence[Polyline | ArrayLike]) -> np.ndarray:
     """Return the ``(K, 4)`` axis-aligned boxes ``(xmin, ymin, xmax, ymax)`` of polylines.
@@ -95,7 +91,6 @@ def bounding_boxes(polylines: Sequence[Polyline | ArrayLike]) -> np.ndarray:
     boxes = [as_polyline(polyline).box for polyline in polylines]
     return np.array(boxes, dtype=np.float64).reshape(len(boxes), 4)
 
-
 def box_gaps(boxes_a: ArrayLike, boxes_b: ArrayLike) -> np.ndarray:
     """Return the ``(K, L)`` Euclidean gaps between two sets of boxes (0 where they touch).
 
@@ -107,14 +102,38 @@ def box_gaps(boxes_a: ArrayLike, boxes_b: ArrayLike) -> np.ndarray:
     >>> box_gaps([[0.0, 0.0, 1.0, 1.0]], [[4.0, 5.0, 6.0, 6.0], [0.5, 0.5, 2.0, 2.0]])
     array([[5., 0.]])
     """
-    a = np.asarray(boxes_a, dtype=float).reshape(-1, 1, 4)
-    b = np.asarray(boxes_b, dtype=float).reshape(1, -1, 4)
-    with np.errstate(invalid="ignore"):
-        gap_x = np.maximum(np.maximum(a[..., 0] - b[..., 2], b[..., 0] - a[..., 2]), 0.0)
-        gap_y = np.maximum(np.maximum(a[..., 1] - b[..., 3], b[..., 1] - a[..., 3]), 0.0)
-        gaps = np.hypot(gap_x, gap_y)
-    # inf - inf (two empty boxes) gives nan: empty is never near anything.
-    return np.where(np.isnan(gaps), math.inf, gaps)
+    a = np.ascontiguousarray(boxes_a, dtype=np.float64).reshape(-1, 4)
+    b = np.ascontiguousarray(boxes_b, dtype=np.float64).reshape(-1, 4)
+    return _gap_kernel(a, b)
+
+
+def _boxes(polylines: list[Polyline]) -> np.ndarray:
+    """Return the ``(K, 4)`` cached boxes of polylines as one array."""
+    return np.array([line.box for line in polylines], dtype=np.float64).reshape(-1, 4)
+
+
+def _concatenated(polylines: Sequence[Polyline]) -> tuple[np.ndarray, np.ndarray]:
+    """Return all vertices one after the other and the ``(K + 1,)`` bounds of each polyline."""
+    bounds = np.zeros(len(polylines) + 1, dtype=np.int64)
+    bounds[1:] = np.cumsum([len(line) for line in polylines])
+    if not polylines:
+        return np.empty((0, 2)), bounds
+    return np.concatenate([line.points for line in polylines]), bounds
+
+
+@numba.njit(cache=True)
+def _gap_kernel(boxes_a, boxes_b):  # pragma: no cover - compiled
+    """Return the ``(K, L)`` Euclidean gaps between boxes (``inf`` for empty boxes)."""
+    gaps = np.empty((boxes_a.shape[0], boxes_b.shape[0]))
+    for k in range(boxes_a.shape[0]):
+        for m in range(boxes_b.shape[0]):
+            gap_x = max(boxes_a[k, 0] - boxes_b[m, 2], boxes_b[m, 0] - boxes_a[k, 2], 0.0)
+            gap_y = max(boxes_a[k, 1] - boxes_b[m, 3], boxes_b[m, 1] - boxes_a[k, 3], 0.0)
+            gap = math.hypot(gap_x, gap_y)
+            # An empty box is never near anything (inf - inf would otherwise give nan).
+            empty = boxes_a[k, 0] > boxes_a[k, 2] or boxes_b[m, 0] > boxes_b[m, 2]
+            gaps[k, m] = math.inf if empty or math.isnan(gap) else gap
+    return gaps
 
 
 def _viewpoint_pose(viewpoint: ArrayLike) -> np.ndarray:
@@ -126,12 +145,6 @@ def _viewpoint_pose(viewpoint: ArrayLike) -> np.ndarray:
             f"viewpoint must be a finite (x, y) or (x, y, theta) pose, got {viewpoint!r}"
         )
     return pose
-
-
-def _bearings(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """Return the bearings of ``points`` seen from ``pose``, in (-pi, pi] about its heading."""
-    delta = points - pose[:2]
-    return np.asarray(wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - pose[2]))
 
 
 def orient_ccw(polyline: Polyline | ArrayLike, viewpoint: ArrayLike) -> Polyline:
@@ -148,7 +161,8 @@ def orient_ccw(polyline: Polyline | ArrayLike, viewpoint: ArrayLike) -> Polyline
            [ 1.,  1.]])
     """
     polyline = as_polyline(polyline)
-    _, clockwise = _ccw_summary([polyline], _viewpoint_pose(viewpoint))
+    points, bounds = _concatenated([polyline])
+    _, clockwise = _ccw_kernel(points, bounds, _viewpoint_pose(viewpoint))
     return _reversed(polyline) if clockwise[0] else polyline
 
 
@@ -157,65 +171,57 @@ def _reversed(polyline: Polyline) -> Polyline:
     return Polyline._trusted(polyline.points[::-1], polyline.scan_indices[::-1])
 
 
-def _ccw_summary(
-    polylines: Sequence[Polyline], pose: np.ndarray
-) -> tuple[list[tuple[float, float, float]], list[bool]]:
-    """Return the sort key and whether it runs clockwise, for every polyline at once.
+@numba.njit(cache=True)
+def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
+    """Return the counter-clockwise order of polylines and whether each runs clockwise.
 
-    The key is (first bearing, last bearing, distance). A straight edge sweeps its bearing
-    monotonically, so the vertices bound the bearings of the whole polyline - unless an
-    edge crosses the cut behind the sensor (+-pi), in which case the polyline reaches the
-    very start (and end) of the scan order. An empty polyline sorts last.
+    The sort key is (first bearing, last bearing, distance). A straight edge sweeps its
+    bearing monotonically, so the vertices bound the bearings of the whole polyline -
+    unless an edge crosses the cut behind the sensor (+-pi), in which case the polyline
+    reaches the very start (and end) of the scan order. An empty polyline sorts last; ties
+    keep the input order. A polyline runs clockwise when the bearing it sweeps is negative.
     """
-    sizes = [len(polyline) for polyline in polylines]
-    keys = [(math.inf, math.inf, math.inf)] * len(polylines)
-    clockwise = [False] * len(polylines)
-    filled = [k for k, size in enumerate(sizes) if size]
-    if not filled:
-        return keys, clockwise
-    if sum(sizes) <= PYTHON_CCW_VERTICES:
-        x, y, theta = pose.tolist()
-        for k in filled:
-            keys[k], clockwise[k] = _ccw_summary_one(polylines[k].points.tolist(), x, y, theta)
-        return keys, clockwise
-    points = np.concatenate([polylines[k].points for k in filled])
-    starts = np.cumsum([0] + [sizes[k] for k in filled[:-1]])
-    bearings = _bearings(points, pose)
-    distances = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
-    # Edge k joins vertex k and k + 1; the last "edge" pads reduceat at the final vertex.
-    jumps = np.append(bearings[1:] - bearings[:-1], 0.0)
-    inside = np.ones(points.shape[0], dtype=bool)
-    inside[starts[1:] - 1] = False
-    inside[-1] = False
-    sweeps = np.where(inside, wrap_angle(jumps), 0.0)
-    crossings = inside & (np.abs(jumps) > math.pi)
-    first = np.minimum.reduceat(bearings, starts)
-    last = np.maximum.reduceat(bearings, starts)
-    crosses = np.logical_or.reduceat(crossings, starts)
-    first = np.where(crosses, -math.pi, first).tolist()
-    last = np.where(crosses, math.pi, last).tolist()
-    nearest = np.minimum.reduceat(distances, starts).tolist()
-    swept = np.add.reduceat(sweeps, starts).tolist()
-    for row, k in enumerate(filled):
-        keys[k] = (first[row], last[row], nearest[row])
-        clockwise[k] = swept[row] < 0.0
-    return keys, clockwise
+    count = bounds.size - 1
+    keys = np.full((count, 3), math.inf)
+    clockwise = np.zeros(count, np.bool_)
+    for k in range(count):
+        if bounds[k + 1] == bounds[k]:
+            continue
+        first, last, nearest = math.inf, -math.inf, math.inf
+        swept, crosses, before = 0.0, False, 0.0
+        for v in range(bounds[k], bounds[k + 1]):
+            dx, dy = points[v, 0] - pose[0], points[v, 1] - pose[1]
+            bearing = wrap_angle_compiled(math.atan2(dy, dx) - pose[2])
+            nearest = min(nearest, math.hypot(dx, dy))
+            first = min(first, bearing)
+            last = max(last, bearing)
+            if v > bounds[k]:
+                jump = bearing - before
+                swept += wrap_angle_compiled(jump)
+                crosses = crosses or abs(jump) > math.pi
+            before = bearing
+        if crosses:
+            first, last = -math.pi, math.pi
+        keys[k, 0], keys[k, 1], keys[k, 2] = first, last, nearest
+        clockwise[k] = swept < 0.0
+    # Insertion sort: stable, lexicographic, and fast for the few polylines in view.
+    order = np.arange(count)
+    for k in range(1, count):
+        item = order[k]
+        j = k - 1
+        while j >= 0 and _key_less(keys, item, order[j]):
+            order[j + 1] = order[j]
+            j -= 1
+        order[j + 1] = item
+    return order, clockwise
 
 
-def _ccw_summary_one(
-    rows: list[list[float]], x: float, y: float, theta: float
-) -> tuple[tuple[float, float, float], bool]:
-    """Return :func:`_ccw_summary` of one non-empty polyline with Python floats."""
-    bearings = [wrap_angle(math.atan2(py - y, px - x) - theta) for px, py in rows]
-    nearest = min(math.hypot(px - x, py - y) for px, py in rows)
-    swept, crosses = 0.0, False
-    for before, after in itertools.pairwise(bearings):
-        jump = after - before
-        swept += wrap_angle(jump)
-        crosses = crosses or abs(jump) > math.pi
-    if crosses:
-        return (-math.pi, math.pi, nearest), swept < 0.0
-    return (min(bearings), max(bearings), nearest), swept < 0.0
+@numba.njit(cache=True, inline="always")
+def _key_less(keys, a, b):  # pragma: no cover - compiled
+    for column in range(3):
+        if keys[a, column] != keys[b, column]:
+            return keys[a, column] < keys[b, column]
+    return False
 
 
 def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) -> np.ndarray:
@@ -247,8 +253,9 @@ def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) ->
     >>> sort_ccw([left, right, ahead], (0.0, 0.0, np.pi))  # turned: "ahead" spans the cut
     array([2, 0, 1])
     """
-    keys, _ = _ccw_summary([as_polyline(line) for line in polylines], _viewpoint_pose(viewpoint))
-    return np.array(sorted(range(len(keys)), key=keys.__getitem__), dtype=np.int64)
+    points, bounds = _concatenated([as_polyline(line) for line in polylines])
+    order, _ = _ccw_kernel(points, bounds, _viewpoint_pose(viewpoint))
+    return order
 
 
 def similarity_matrix(
@@ -281,140 +288,160 @@ def similarity_matrix(
         costs[i, j] = similarity(scans[i], maps[j])
     return costs
 
-
 def _optimal_path(costs: np.ndarray) -> list[tuple[int, int]]:
     """Return the DTW path of eq. (5) from ``(0, 0)`` to ``(n - 1, m - 1)``.
 
     On equal totals the diagonal step wins (a one-to-one pair), then the step that keeps
     the map polyline, then the one that keeps the scan polyline.
     """
-    path, _ = _dtw(costs.tolist())
-    return path
+    path, _ = _dtw_kernel(np.ascontiguousarray(costs, dtype=np.float64))
+    return [(int(i), int(j)) for i, j in path]
 
 
-def _dtw(cost: list[list[float]]) -> tuple[list[tuple[int, int]], list[list[float]]]:
-    """Return the path of :func:`_optimal_path` and the table of optimal totals."""
-    n, m = len(cost), len(cost[0])
+@numba.njit(cache=True)
+def _dtw_kernel(cost):  # pragma: no cover - compiled
+    """Return the ``(P, 2)`` path of :func:`_optimal_path` and the table of optimal totals."""
+    n, m = cost.shape
+    totals = np.empty((n, m))
     # 0 diagonal, 1 from (i - 1, j), 2 from (i, j - 1); the first row only comes from the left.
-    previous = list(itertools.accumulate(cost[0]))
-    totals = [previous]
-    step = [[0] + [2] * (m - 1)]
+    step = np.empty((n, m), np.int64)
+    totals[0, 0] = cost[0, 0]
+    step[0, 0] = 0
+    for j in range(1, m):
+        totals[0, j] = totals[0, j - 1] + cost[0, j]
+        step[0, j] = 2
     for i in range(1, n):
-        cost_row = cost[i]
-        left = previous[0] + cost_row[0]
-        row, moves = [left], [1]
+        left = totals[i - 1, 0] + cost[i, 0]
+        totals[i, 0] = left
+        step[i, 0] = 1
         for j in range(1, m):
-            best, move = previous[j - 1], 0
-            if previous[j] < best:
-                best, move = previous[j], 1
+            best, move = totals[i - 1, j - 1], 0
+            if totals[i - 1, j] < best:
+                best, move = totals[i - 1, j], 1
             if left < best:
                 best, move = left, 2
-            left = best + cost_row[j]
-            row.append(left)
-            moves.append(move)
-        previous = row
-        totals.append(row)
-        step.append(moves)
-    path = []
+            left = best + cost[i, j]
+            totals[i, j] = left
+            step[i, j] = move
+    path = np.empty((n + m - 1, 2), np.int64)
+    size = 0
     i, j = n - 1, m - 1
     while True:
-        path.append((i, j))
+        path[size, 0], path[size, 1] = i, j
+        size += 1
         if i == 0 and j == 0:
             break
-        move = step[i][j]
+        move = step[i, j]
         if move == 0:
             i, j = i - 1, j - 1
         elif move == 1:
             i -= 1
         else:
             j -= 1
-    path.reverse()
-    return path, totals
+    forward = np.empty((size, 2), np.int64)
+    for k in range(size):
+        forward[k] = path[size - 1 - k]
+    return forward, totals
 
 
-def _is_unique(path: list[tuple[int, int]], totals: list[list[float]]) -> bool:
+@numba.njit(cache=True)
+def _is_unique(path, totals):  # pragma: no cover - compiled
     """Return whether no other path reaches the end of ``path`` with the same total.
 
     Another optimal path would leave this one, walking back from the end, at a cell where
     two predecessors tie for the best total.
     """
-    for i, j in path[1:]:
-        before = [
-            totals[a][b] for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)) if a >= 0 and b >= 0
-        ]
-        if before.count(min(before)) > 1:
+    for k in range(1, path.shape[0]):
+        i, j = path[k, 0], path[k, 1]
+        best, ties = math.inf, 0
+        for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)):
+            if a >= 0 and b >= 0:
+                if totals[a, b] < best:
+                    best, ties = totals[a, b], 1
+                elif totals[a, b] == best:
+                    ties += 1
+        if ties > 1:
             return False
     return True
 
 
-def _length(polyline: Polyline) -> float:
-    """Return the arc length (m) of a polyline with Python floats."""
-    rows = polyline.points.tolist()
-    return sum(map(math.dist, rows, rows[1:]))
+@numba.njit(cache=True)
+def _lengths(points, bounds):  # pragma: no cover - compiled
+    """Return the arc length (m) of each polyline of concatenated ``points``."""
+    lengths = np.zeros(bounds.size - 1)
+    for k in range(bounds.size - 1):
+        for v in range(bounds[k], bounds[k + 1] - 1):
+            dx, dy = points[v + 1, 0] - points[v, 0], points[v + 1, 1] - points[v, 1]
+            lengths[k] += math.hypot(dx, dy)
+    return lengths
 
 
-def _near_boxes(
-    boxes_a: list[tuple[float, ...]], boxes_b: list[tuple[float, ...]], gate: float
-) -> list[list[bool]]:
-    """Return :func:`box_gaps` ``<= gate`` as lists (Python floats for a few pairs)."""
-    if len(boxes_a) * len(boxes_b) > PYTHON_BOX_PAIRS:
-        gaps = box_gaps(np.array(boxes_a).reshape(-1, 4), np.array(boxes_b).reshape(-1, 4))
-        return (gaps <= gate).tolist()
-    near = []
-    for xmin, ymin, xmax, ymax in boxes_a:
-        row = []
-        for other_xmin, other_ymin, other_xmax, other_ymax in boxes_b:
-            gap_x = max(xmin - other_xmax, other_xmin - xmax, 0.0)
-            gap_y = max(ymin - other_ymax, other_ymin - ymax, 0.0)
-            row.append(gap_x <= gate and gap_y <= gate and math.hypot(gap_x, gap_y) <= gate)
-        near.append(row)
-    return near
+@numba.njit(cache=True)
+def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds):  # pragma: no cover
+    """Return the path of :func:`_forced_path` and whether the gate alone fixes it."""
+    scan_lengths = _lengths(scan_points, scan_bounds)
+    map_lengths = _lengths(map_points, map_bounds)
+    n, m = feasible.shape
+    shaped = scan_lengths.min() > 0.0 and map_lengths.min() > 0.0
+    diagonal = shaped and n == m
+    for a in range(n):
+        for b in range(m):
+            if feasible[a, b] != (a == b):
+                diagonal = False
+    if diagonal:
+        # Each polyline near exactly its counterpart in the same order (the usual case): the
+        # diagonal is the only path without a FAR_COST pair.
+        path = np.empty((n, 2), np.int64)
+        for k in range(n):
+            path[k, 0], path[k, 1] = k, k
+    else:
+        hard = np.ones((n, m))
+        for a in range(n):
+            for b in range(m):
+                if feasible[a, b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
+                    hard[a, b] = 0.0
+        path, totals = _dtw_kernel(hard)
+        if not _is_unique(path, totals):
+            return path, False
+    bound = 0.0
+    for k in range(path.shape[0]):
+        a, b = path[k, 0], path[k, 1]
+        if feasible[a, b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
+            ratio = max(scan_lengths[a] / map_lengths[b], map_lengths[b] / scan_lengths[a])
+            vertices = (scan_bounds[a + 1] - scan_bounds[a]) + (map_bounds[b + 1] - map_bounds[b])
+            bound += 2.0 * (vertices * math.pi) ** 2 * ratio
+    return path, bound < FAR_COST
 
 
 def _forced_path(
-    feasible: list[list[bool]], scans: list[Polyline], maps: list[Polyline]
+    feasible: np.ndarray,
+    scan_points: np.ndarray,
+    scan_bounds: np.ndarray,
+    map_points: np.ndarray,
+    map_bounds: np.ndarray,
 ) -> list[tuple[int, int]] | None:
     """Return the association path when the similarities cannot change it, else ``None``.
 
-    A pair that cannot pass the gate or has no shape (zero length) costs ``FAR_COST``; any
-    other costs its similarity, the integral of eq. (1) times the length ratio. That
-    integral is a variance, at most a quarter of the squared range of ``T1 - T0``, which
-    is at most ``pi`` per turn of either polyline: less than ``((N0 + N1) pi)^2 / 4`` for
-    ``N0`` and ``N1`` vertices (eight times that is used, far clear of any rounding).
-    When a single path has the fewest ``FAR_COST`` pairs, every other path costs at least
-    one ``FAR_COST`` more; if the bounds along that path add up to less than ``FAR_COST``,
-    it is the optimal path of eq. (5) whatever the similarities are, and none needs to be
-    computed (for a map in view, usually all of them).
+    ``feasible`` marks the pairs that can pass the gate; the polylines are given as
+    concatenated vertices with bounds (:func:`_concatenated`). A pair that cannot pass the
+    gate or has no shape (zero length) costs ``FAR_COST``; any other costs its similarity,
+    the integral of eq. (1) times the length ratio. That integral is a variance, at most a
+    quarter of the squared range of ``T1 - T0``, which is at most ``pi`` per turn of either
+    polyline: less than ``((N0 + N1) pi)^2 / 4`` for ``N0`` and ``N1`` vertices (eight
+    times that is used, far clear of any rounding). When a single path has the fewest
+    ``FAR_COST`` pairs, every other path costs at least one ``FAR_COST`` more; if the
+    bounds along that path add up to less than ``FAR_COST``, it is the optimal path of
+    eq. (5) whatever the similarities are, and none needs to be computed (for a map in
+    view, usually all of them).
     """
-    scan_lengths = [_length(line) for line in scans]
-    map_lengths = [_length(line) for line in maps]
-    shaped = all(scan_lengths) and all(map_lengths)
-    size = len(feasible)
-    if (
-        shaped
-        and size == len(feasible[0])
-        and all(feasible[a][b] == (a == b) for a in range(size) for b in range(size))
-    ):
-        # Each polyline near exactly its counterpart in the same order (the usual case): the
-        # diagonal is the only path without a FAR_COST pair.
-        path = [(k, k) for k in range(size)]
-    else:
-        hard = [
-            [
-                0.0 if near and scan_length > 0.0 and map_length > 0.0 else 1.0
-                for near, map_length in zip(row, map_lengths, strict=True)
-            ]
-            for row, scan_length in zip(feasible, scan_lengths, strict=True)
-        ]
-        path, totals = _dtw(hard)
-        if not _is_unique(path, totals):
-            return None
-    bound = 0.0
-    for a, b in path:
-        if feasible[a][b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
-            ratio = max(scan_lengths[a] / map_lengths[b], map_lengths[b] / scan_lengths[a])
-            bound += 2.0 * ((len(scans[a]) + len(maps[b])) * math.pi) ** 2 * ratio
-    return path if bound < FAR_COST else None
+    path, forced = _forced_kernel(
+        np.ascontiguousarray(feasible, dtype=np.bool_),
+        np.ascontiguousarray(scan_points, dtype=np.float64),
+        scan_bounds,
+        np.ascontiguousarray(map_points, dtype=np.float64),
+        map_bounds,
+    )
+    return [(int(i), int(j)) for i, j in path] if forced else None
 
 
 def associate_with_distances(
@@ -446,44 +473,107 @@ def associate_with_distances(
     maps = [as_polyline(polyline) for polyline in map_polylines]
     if not scans or not maps:
         return []
+    pose = None if viewpoint is None else _viewpoint_pose(viewpoint)
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects.
-    near = _near_boxes([line.box for line in scans], [line.box for line in maps], gate)
-    rows = [i for i, row in enumerate(near) if any(row)]
-    if not rows:
+    near, rows, columns = _broad_phase(_boxes(scans), _boxes(maps), float(gate))
+    if rows.size == 0:
         return []
-    columns = [j for j in range(len(maps)) if any(row[j] for row in near)]
-    if viewpoint is None:
-        order = columns
-        ordered = [maps[k] for k in order]
+    scans = [scans[k] for k in rows.tolist()]
+    candidates = [maps[k] for k in columns.tolist()]
+    scan_points, scan_bounds = _concatenated(scans)
+    map_points, map_bounds = _concatenated(candidates)
+    if pose is None:
+        ranks = np.arange(columns.size)
+        clockwise = np.zeros(columns.size, dtype=np.bool_)
     else:
-        candidates = [maps[k] for k in columns]
-        keys, clockwise = _ccw_summary(candidates, _viewpoint_pose(viewpoint))
-        ranks = sorted(range(len(candidates)), key=keys.__getitem__)
-        order = [columns[k] for k in ranks]
-        # Similarity compares tangent functions, which needs both polylines traversed the
-        # same way round: a map polyline first seen from its other side is reversed.
-        ordered = [_reversed(candidates[k]) if clockwise[k] else candidates[k] for k in ranks]
-    feasible = [[near[row][column] for column in order] for row in rows]
-    path = _forced_path(feasible, [scans[row] for row in rows], ordered)
+        ranks, clockwise = _ccw_kernel(map_points, map_bounds, pose)
+    # Similarity compares tangent functions, which needs both polylines traversed the
+    # same way round: a map polyline first seen from its other side is reversed.
+    feasible, map_points, map_bounds = _arranged(
+        near, rows, columns, ranks, clockwise, map_points, map_bounds
+    )
+    order = columns[ranks]
+    path = _forced_path(feasible, scan_points, scan_bounds, map_points, map_bounds)
     if path is None:
-        costs = np.full((len(rows), len(order)), FAR_COST)
+        ordered = [
+            _reversed(candidates[k]) if clockwise[k] else candidates[k] for k in ranks.tolist()
+        ]
+        costs = np.full(feasible.shape, FAR_COST)
         for a, b in zip(*np.nonzero(feasible), strict=True):
-            value = similarity(scans[rows[a]], ordered[b])
+            value = similarity(scans[a], ordered[b])
             if value < FAR_COST:
                 costs[a, b] = value
         path = _optimal_path(costs)
-    pairs = []
-    for a, b in path:
-        scan, candidate = scans[rows[a]], ordered[b]
-        if not feasible[a][b] or len(scan) == 0 or len(candidate) == 0:
-            continue
-        # Stops early above the gate: the value is then only a lower bound, but one that
-        # fails the gate exactly when the full distance does.
-        distance = _restricted_distance(scan, candidate, mode, limit=gate)
-        if distance <= gate:
-            pairs.append((rows[a], order[b], float(distance)))
-    return pairs
+    # Stops early above the gate: the value is then only a lower bound, but one that
+    # fails the gate exactly when the full distance does.
+    pairs = _gateable(np.array(path, dtype=np.int64).reshape(-1, 2), feasible, scan_bounds,
+                      map_bounds)
+    distances = pairwise_restricted_hausdorff(
+        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=gate
+    )
+    return [
+        (int(rows[a]), int(order[b]), distance)
+        for (a, b), distance in zip(pairs.tolist(), distances.tolist(), strict=True)
+        if distance <= gate
+    ]
+
+
+@numba.njit(cache=True)
+def _broad_phase(scan_boxes, map_boxes, gate):  # pragma: no cover - compiled
+    """Return which pairs' boxes are within ``gate``, and the scan and map polylines in one."""
+    near = _gap_kernel(scan_boxes, map_boxes) <= gate
+    rows = np.empty(near.shape[0], np.int64)
+    columns = np.empty(near.shape[1], np.int64)
+    row_count, column_count = 0, 0
+    for a in range(near.shape[0]):
+        if near[a].any():
+            rows[row_count] = a
+            row_count += 1
+    for b in range(near.shape[1]):
+        if near[:, b].any():
+            columns[column_count] = b
+            column_count += 1
+    return near, rows[:row_count], columns[:column_count]
+
+
+@numba.njit(cache=True)
+def _arranged(near, rows, columns, ranks, clockwise, points, bounds):  # pragma: no cover
+    """Return the feasible pairs and the candidate map polylines in counter-clockwise order.
+
+    Candidate ``k`` (``points[bounds[k]:bounds[k + 1]]``) takes place ``ranks``-position
+    and is reversed where ``clockwise``.
+    """
+    feasible = np.empty((rows.size, ranks.size), np.bool_)
+    for a in range(rows.size):
+        for b in range(ranks.size):
+            feasible[a, b] = near[rows[a], columns[ranks[b]]]
+    ordered = np.empty_like(points)
+    ordered_bounds = np.zeros(ranks.size + 1, np.int64)
+    for b in range(ranks.size):
+        k = ranks[b]
+        start, stop = bounds[k], bounds[k + 1]
+        base = ordered_bounds[b]
+        for v in range(stop - start):
+            source = stop - 1 - v if clockwise[k] else start + v
+            ordered[base + v, 0] = points[source, 0]
+            ordered[base + v, 1] = points[source, 1]
+        ordered_bounds[b + 1] = base + stop - start
+    return feasible, ordered, ordered_bounds
+
+
+@numba.njit(cache=True)
+def _gateable(path, feasible, scan_bounds, map_bounds):  # pragma: no cover - compiled
+    """Return the pairs of ``path`` that can pass the gate (feasible, both non-empty)."""
+    pairs = np.empty_like(path)
+    count = 0
+    for k in range(path.shape[0]):
+        a, b = path[k, 0], path[k, 1]
+        filled = scan_bounds[a + 1] > scan_bounds[a] and map_bounds[b + 1] > map_bounds[b]
+        if feasible[a, b] and filled:
+            pairs[count] = path[k]
+            count += 1
+    return pairs[:count]
 
 
 def associate(

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -28,6 +29,7 @@ __all__ = [
     "transform_points",
     "untransform_points",
     "wrap_angle",
+    "wrap_angle_compiled",
 ]
 
 
@@ -55,6 +57,21 @@ def wrap_angle(angle: ArrayLike) -> np.ndarray | float:
     # Rounding can land exactly on -pi (just above pi, say): the interval is (-pi, pi].
     wrapped = np.where(wrapped == -np.pi, np.pi, wrapped)
     return float(wrapped) if wrapped.ndim == 0 else wrapped
+
+
+@numba.njit(cache=True)
+def wrap_angle_compiled(angle: float) -> float:
+    """Wrap one angle to ``(-pi, pi]`` inside compiled (numba) kernels, as :func:`wrap_angle`.
+
+    Examples
+    --------
+    >>> wrap_angle_compiled(3 * math.pi / 2)
+    -1.5707963267948966
+    >>> wrap_angle_compiled(-math.pi)
+    3.141592653589793
+    """
+    wrapped = math.pi - (math.pi - angle) % (2.0 * math.pi)
+    return math.pi if wrapped == -math.pi else wrapped
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> np.ndarray:

@@ -12,10 +12,8 @@ unseen part, not the displacement; so both are first *restricted* to their overl
   P1 projects (for a scan-ordered partial view: the projections of its end points).
 
 The distance between the restricted polylines is taken between the *continuous* curves,
-not only their vertices, to within ``HAUSDORFF_TOLERANCE``. Polylines of a few vertices
-(the usual case: up to ``PYTHON_PAIRS`` vertex pairs) go through Python-float twins of
-the projection restriction and of the vectorised branch and bound, which run the same
-steps (in the same rounds).
+not only their vertices, to within ``HAUSDORFF_TOLERANCE``. One compiled kernel (numba)
+computes the restriction and the distance of a pair, whatever its size.
 
 Conventions for degenerate input: a single vertex is a point (distances to it are point
 distances); a polyline with no vertices is at ``inf`` from everything, and restricting
@@ -37,15 +35,21 @@ array([1., 2., 3.])
 
 from __future__ import annotations
 
-import itertools
 import math
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.polyline import Polyline, as_polyline
 
-__all__ = ["HAUSDORFF_TOLERANCE", "hausdorff", "restrict", "restricted_hausdorff"]
+__all__ = [
+    "HAUSDORFF_TOLERANCE",
+    "hausdorff",
+    "pairwise_restricted_hausdorff",
+    "restrict",
+    "restricted_hausdorff",
+]
 
 # The continuous Hausdorff distance is returned within this (m) below the true value
 # (branch and bound on the distance along each edge stops when no piece can beat the
@@ -59,94 +63,9 @@ _MIN_SPLIT = 0.01
 # Keeps the chord-crossing division finite when one segment is nearest at both ends.
 _TINY = 1e-300
 
-_MODES = ("vertex", "projection")
-
-# Up to this many vertex pairs (N0 * N1) the distance is computed with Python floats:
-# numpy costs about 1 us per call whatever the size, and the vectorised branch and bound
-# makes 50-170 calls, while the Python twin costs about 0.3 us per point-segment distance.
-PYTHON_PAIRS = 100
-
-
-class _Segments:
-    """Segments as complex numbers, prepared once for many point-to-segment queries."""
-
-    __slots__ = ("direction", "ends", "inverse", "reverse", "starts")
-
-    def __init__(self, starts: np.ndarray, ends: np.ndarray) -> None:
-        self.starts = starts
-        self.ends = ends
-        self.direction = ends - starts
-        self.reverse = np.conj(self.direction)
-        length2 = (self.direction * self.reverse).real
-        self.inverse = 1.0 / np.where(length2 > 0.0, length2, np.inf)  # null segment: t = 0
-
-    def distances(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(distance, t)`` from complex ``points`` (M,) to every segment (M, S).
-
-        A point whose nearest point is a segment end gets exactly ``|p - end|``, so two
-        segments sharing a vertex tie exactly there (and argmin picks the lower one).
-        """
-        offset = points[:, None] - self.starts
-        t = (offset * self.reverse).real * self.inverse
-        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-        gap = np.where(t < 1.0, offset - t * self.direction, points[:, None] - self.ends)
-        return np.abs(gap), t
-
-
-def _complex(points: np.ndarray) -> np.ndarray:
-    """Return ``(N, 2)`` float points as ``(N,)`` complex numbers ``x + iy``."""
-    return np.ascontiguousarray(points, dtype=np.float64).view(np.complex128)[:, 0]
-
-
-def _segments(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return the start and end points of a polyline's segments (a point: one null one)."""
-    if points.shape[0] == 1:
-        return points, points
-    return points[:-1], points[1:]
-
-
-def _span(nearest: np.ndarray) -> tuple[int, int]:
-    """Return the first and last vertex (inclusive) spanned by the nearest segments."""
-    segments = nearest.tolist()  # a handful of ints: plain Python beats two reductions
-    return min(segments), max(segments) + 1
-
-
-def _restricted(p0: Polyline, p1: Polyline, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """Return the vertices and scan indices of ``P0|P1``."""
-    if mode not in _MODES:
-        raise ValueError(f"restrict: mode must be one of {_MODES}, got {mode!r}")
-    points, indices = p0.points, p0.scan_indices
-    if points.shape[0] < 2 or p1.points.shape[0] == 0:
-        return points, indices
-    vertices = _complex(points)
-    distance, t = _Segments(vertices[:-1], vertices[1:]).distances(_complex(p1.points))
-    # argmin picks the lowest segment on ties, as eq. (3) with its argmin over j.
-    nearest = np.argmin(distance, axis=1)
-    if mode == "vertex":
-        low, high = _span(nearest)
-        if low == 0 and high == points.shape[0] - 1:
-            return points, indices
-        return points[low : high + 1], indices[low : high + 1]
-    lengths = p0.edge_lengths
-    arc = np.concatenate(([0.0], np.cumsum(lengths)))
-    position = arc[nearest] + t[np.arange(nearest.size), nearest] * lengths[nearest]
-    first, last = int(np.argmin(position)), int(np.argmax(position))
-    start, stop = position[first], position[last]
-
-    def cut(vertex: int) -> tuple[np.ndarray, int]:
-        segment, fraction = nearest[vertex], t[vertex, nearest[vertex]]
-        point = points[segment] + fraction * (points[segment + 1] - points[segment])
-        return point, int(indices[segment + (1 if fraction >= 0.5 else 0)])
-
-    start_point, start_index = cut(first)
-    if stop == start:
-        return start_point[None, :], np.array([start_index])
-    stop_point, stop_index = cut(last)
-    inside = (arc > start) & (arc < stop)
-    return (
-        np.vstack((start_point, points[inside], stop_point)),
-        np.concatenate(([start_index], indices[inside], [stop_index])),
-    )
+# Restriction codes of the kernel, by mode name (no restriction for the plain distance).
+_MODES = {"vertex": 1, "projection": 2}
+_UNRESTRICTED = 0
 
 
 def restrict(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike, mode: str = "vertex") -> Polyline:
@@ -178,253 +97,18 @@ def restrict(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike, mode: str = "ve
     array([[2.5, 0. ],
            [3.5, 0. ]])
     """
-    p0 = as_polyline(p0)
-    points, indices = _restricted(p0, as_polyline(p1), mode)
-    if points is p0.points:
+    code = _mode_code(mode)
+    p0, p1 = as_polyline(p0), as_polyline(p1)
+    if len(p0) < 2 or len(p1) == 0:
         return p0
-    return Polyline(points, indices)
-
-
-def _hausdorff_core(points0: np.ndarray, points1: np.ndarray, vertex_restricted: bool) -> float:
-    """Return the symmetric Hausdorff distance of two polylines as continuous curves.
-
-    With ``vertex_restricted`` both are first restricted to each other (eq. 3); the
-    vertex-to-segment distances that choose the restriction are the same that start the
-    distance computation, so all of them come from one matrix.
-
-    Both directed distances are found together by branch and bound along the edges of
-    the source curve. On a piece ``[a, b]`` of an edge the distance ``d_j`` to each target
-    segment is convex, hence below its chord; for the segments ``i`` and ``j`` nearest to
-    ``a`` and ``b``, the maximum of ``f = min_j d_j`` on the piece is at most the crossing
-    value of their chords (``max(f(a), f(b))`` when ``i`` serves both ends). Pieces whose
-    bound beats the best value found by more than ``HAUSDORFF_TOLERANCE`` are split at the
-    chord crossing, which is exact when both distances are linear (to segment
-    interiors). Every ``d_j`` is 1-Lipschitz, so the bound exceeds ``f(a)`` by at most
-    the piece length: halving after ``_CHORD_SPLITS`` rounds ends the search.
-    """
-    count0, count1 = points0.shape[0], points1.shape[0]
-    if count0 == 0 or count1 == 0:
-        return math.inf
-    vertices = _complex(np.concatenate((points0, points1)))
-    starts0, ends0 = _segments(vertices[:count0])
-    starts1, ends1 = _segments(vertices[count0:])
-    segments0 = starts0.shape[0]
-    segments = _Segments(np.concatenate((starts0, starts1)), np.concatenate((ends0, ends1)))
-    distance, _ = segments.distances(vertices)
-    # Vertex range [low, high] of each polyline taking part; its segments [low, high).
-    low0, high0, low1, high1 = 0, count0 - 1, 0, count1 - 1
-    if vertex_restricted and count0 >= 2 and count1 >= 2:
-        low0, high0 = _span(np.argmin(distance[count0:, :segments0], axis=1))
-        low1, high1 = _span(np.argmin(distance[:count0, segments0:], axis=1))
-    # Each vertex may only measure against the other polyline's kept segments.
-    blocked = np.full(distance.shape, np.inf)
-    blocked[:count0, segments0 + low1 : segments0 + max(high1, low1 + 1)] = 0.0
-    blocked[count0:, low0 : max(high0, low0 + 1)] = 0.0
-    distance += blocked
-    nearest = distance.min(axis=1)
-    best = max(
-        float(nearest[low0 : high0 + 1].max()),
-        float(nearest[count0 + low1 : count0 + high1 + 1].max()),
-    )
-    # Pieces: the kept edges of both polylines (the pair of vertices across the two
-    # polylines is not an edge).
-    edge = np.zeros(count0 + count1 - 1, dtype=bool)
-    edge[low0:high0] = True
-    edge[count0 + low1 : count0 + high1] = True
-    if not edge.any():
-        return best
-    a, b = vertices[:-1][edge], vertices[1:][edge]
-    da, db, mask = distance[:-1][edge], distance[1:][edge], blocked[:-1][edge]
-    fa, fb = nearest[:-1][edge], nearest[1:][edge]
-    rounds = 0
-    while True:
-        rows = np.arange(a.shape[0])
-        i, j = np.argmin(da, axis=1), np.argmin(db, axis=1)
-        # Chord of d_i runs from fa to end_i; chord of d_j from start_j to fb.
-        end_i, start_j = db[rows, i], da[rows, j]
-        lead = start_j - fa
-        crossing = lead / ((end_i - fb) + lead + _TINY)  # in [0, 1]; 0 when i == j
-        bound = np.maximum(fa + crossing * (end_i - fa), fb)
-        open_ = bound > best + HAUSDORFF_TOLERANCE
-        if not open_.any():
-            return best
-        a, b, da, db, mask, fa, fb = (x[open_] for x in (a, b, da, db, mask, fa, fb))
-        bound = bound[open_]
-        split = crossing[open_] if rounds < _CHORD_SPLITS else np.full(a.shape[0], 0.5)
-        np.minimum(np.maximum(split, _MIN_SPLIT, out=split), 1.0 - _MIN_SPLIT, out=split)
-        middle = a + split * (b - a)
-        dm, _ = segments.distances(middle)
-        dm += mask
-        fm = dm.min(axis=1)
-        best = max(best, float(fm.max()))
-        # A piece whose new point comes within the tolerance of its bound is settled: with
-        # linear distances (segment interiors) the chord crossing is the maximum itself.
-        unsettled = fm < bound - HAUSDORFF_TOLERANCE
-        if not unsettled.any():
-            return best
-        if not unsettled.all():
-            a, b, da, db, mask, fa, fb, middle, dm, fm = (
-                x[unsettled] for x in (a, b, da, db, mask, fa, fb, middle, dm, fm)
-            )
-        a, b = np.concatenate((a, middle)), np.concatenate((middle, b))
-        da, db = np.concatenate((da, dm)), np.concatenate((dm, db))
-        fa, fb = np.concatenate((fa, fm)), np.concatenate((fm, fb))
-        mask = np.concatenate((mask, mask))
-        rounds += 1
-
-
-def _python_segments(rows: list[list[float]]) -> list[tuple[float, ...]]:
-    """Return ``(ax, ay, dx, dy, inverse squared length, bx, by)`` per segment (a point: one)."""
-    if len(rows) == 1:
-        (x, y) = rows[0]
-        return [(x, y, 0.0, 0.0, 0.0, x, y)]
-    segments = []
-    for (ax, ay), (bx, by) in itertools.pairwise(rows):
-        dx, dy = bx - ax, by - ay
-        length2 = dx * dx + dy * dy
-        segments.append((ax, ay, dx, dy, 1.0 / length2 if length2 > 0.0 else 0.0, bx, by))
-    return segments
-
-
-def _python_distances(px: float, py: float, segments: list[tuple[float, ...]]) -> list[float]:
-    """Return the distances from one point to ``segments``, as :meth:`_Segments.distances`."""
-    distances = []
-    hypot = math.hypot
-    for ax, ay, dx, dy, inverse, bx, by in segments:
-        ox, oy = px - ax, py - ay
-        t = (ox * dx + oy * dy) * inverse
-        if t >= 1.0:
-            distances.append(hypot(px - bx, py - by))
-        elif t > 0.0:
-            distances.append(hypot(ox - t * dx, oy - t * dy))
-        else:
-            distances.append(hypot(ox, oy))
-    return distances
-
-
-def _python_rows(
-    points: list[list[float]], segments: list[tuple[float, ...]]
-) -> tuple[list[list[float]], list[float], list[int]]:
-    """Return each point's distances to ``segments``, their minimum and its first index."""
-    rows, nearest, argmins = [], [], []
-    hypot = math.hypot
-    for px, py in points:
-        # _python_distances, inlined: this is the bulk of the work for small polylines.
-        row = []
-        for ax, ay, dx, dy, inverse, bx, by in segments:
-            ox, oy = px - ax, py - ay
-            t = (ox * dx + oy * dy) * inverse
-            if t >= 1.0:
-                row.append(hypot(px - bx, py - by))
-            elif t > 0.0:
-                row.append(hypot(ox - t * dx, oy - t * dy))
-            else:
-                row.append(hypot(ox, oy))
-        smallest = min(row)
-        rows.append(row)
-        nearest.append(smallest)
-        argmins.append(row.index(smallest))
-    return rows, nearest, argmins
-
-
-def _sliced_rows(
-    rows: list[list[float]], start: int, stop: int
-) -> tuple[list[list[float]], list[float], list[int]]:
-    """Return :func:`_python_rows` for the segments ``start:stop`` only."""
-    rows = [row[start:stop] for row in rows]
-    nearest = [min(row) for row in rows]
-    return rows, nearest, [row.index(smallest) for row, smallest in zip(rows, nearest, strict=True)]
-
-
-def _hausdorff_python(
-    points0: list[list[float]], points1: list[list[float]], vertex_restricted: bool, limit: float
-) -> float:
-    """Return :func:`_hausdorff_core` computed with Python floats (fast for a few vertices).
-
-    The same branch and bound in the same rounds, so the result only differs from the
-    vectorised one by rounding. Returns as soon as the best distance found exceeds
-    ``limit``: it is then a lower bound of the result, and above ``limit`` too.
-    """
-    count0, count1 = len(points0), len(points1)
-    if count0 == 0 or count1 == 0:
-        return math.inf
-    segments0, segments1 = _python_segments(points0), _python_segments(points1)
-    # Vertex-to-segment distances across the two polylines: each vertex's row, its
-    # minimum and the first segment attaining it (numpy.argmin's rule).
-    to1, nearest_to1, argmin_to1 = _python_rows(points0, segments1)
-    to0, nearest_to0, argmin_to0 = _python_rows(points1, segments0)
-    low0, high0, low1, high1 = 0, count0 - 1, 0, count1 - 1
-    stop0, stop1 = len(segments0), len(segments1)
-    if vertex_restricted and count0 >= 2 and count1 >= 2:
-        low0, high0 = min(argmin_to0), max(argmin_to0) + 1
-        low1, high1 = min(argmin_to1), max(argmin_to1) + 1
-        # Each vertex only measures against the other polyline's kept segments.
-        stop0, stop1 = high0, high1
-        if low1 > 0 or stop1 < len(segments1):
-            to1, nearest_to1, argmin_to1 = _sliced_rows(to1, low1, stop1)
-        if low0 > 0 or stop0 < len(segments0):
-            to0, nearest_to0, argmin_to0 = _sliced_rows(to0, low0, stop0)
-    best = max(max(nearest_to1[low0 : high0 + 1]), max(nearest_to0[low1 : high1 + 1]))
-    if best > limit:
-        return best
-    # A piece of an edge: (a, b, distances at a and b, nearest at a and b, target segments).
-    # An edge whose ends have the same nearest segment is settled from the start (its
-    # bound is the larger end value, already in ``best``), so it is not even a piece.
-    pieces = []
-    for points, rows, nearest, argmins, low, high, targets in (
-        (points0, to1, nearest_to1, argmin_to1, low0, high0, segments1[low1:stop1]),
-        (points1, to0, nearest_to0, argmin_to0, low1, high1, segments0[low0:stop0]),
-    ):
-        for k in range(low, high):
-            if argmins[k] != argmins[k + 1]:
-                (ax, ay), (bx, by) = points[k], points[k + 1]
-                pieces.append(
-                    (ax, ay, bx, by, rows[k], rows[k + 1], nearest[k], nearest[k + 1], targets)
-                )
-    rounds = 0
-    while pieces:
-        split_pieces = []
-        found = False
-        for piece in pieces:
-            ax, ay, bx, by, da, db, fa, fb, targets = piece
-            end_i, start_j = db[da.index(min(da))], da[db.index(min(db))]
-            lead = start_j - fa
-            crossing = lead / ((end_i - fb) + lead + _TINY)
-            bound = max(fa + crossing * (end_i - fa), fb)
-            if bound <= best + HAUSDORFF_TOLERANCE:
-                continue
-            found = True
-            split = crossing if rounds < _CHORD_SPLITS else 0.5
-            split = min(max(split, _MIN_SPLIT), 1.0 - _MIN_SPLIT)
-            mx, my = ax + split * (bx - ax), ay + split * (by - ay)
-            dm = _python_distances(mx, my, targets)
-            fm = min(dm)
-            split_pieces.append((piece, mx, my, dm, fm, fm < bound - HAUSDORFF_TOLERANCE))
-        if not found:
-            return best
-        # The whole round is bounded against the best value from before it, as in numpy.
-        best = max(best, *(item[4] for item in split_pieces))
-        if best > limit:
-            return best
-        kept = [item for item in split_pieces if item[5]]
-        pieces = [
-            (p[0], p[1], mx, my, p[4], dm, p[6], fm, p[8]) for p, mx, my, dm, fm, _ in kept
-        ] + [(mx, my, p[2], p[3], dm, p[5], fm, p[7], p[8]) for p, mx, my, dm, fm, _ in kept]
-        rounds += 1
-    return best
-
-
-def _distance(
-    points0: np.ndarray, points1: np.ndarray, vertex_restricted: bool, limit: float = math.inf
-) -> float:
-    """Return :func:`_hausdorff_core` the cheaper way for the size.
-
-    The result may stop at any value above ``limit`` (a lower bound of the distance, so
-    ``result <= limit`` decides the same either way).
-    """
-    if points0.shape[0] * points1.shape[0] <= PYTHON_PAIRS:
-        return _hausdorff_python(points0.tolist(), points1.tolist(), vertex_restricted, limit)
-    return _hausdorff_core(points0, points1, vertex_restricted)
+    points0, points1 = _kernel_points(p0), _kernel_points(p1)
+    if code == _MODES["vertex"]:
+        low, high = _vertex_span(points0, points1)
+        if low == 0 and high == len(p0) - 1:
+            return p0
+        return Polyline(p0.points[low : high + 1], p0.scan_indices[low : high + 1])
+    vertices, sources = _projection_cut(points0, points1)
+    return Polyline(vertices, p0.scan_indices[sources])
 
 
 def hausdorff(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
@@ -445,11 +129,17 @@ def hausdorff(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
     >>> hausdorff([[0, 0]], np.empty((0, 2)))
     inf
     """
-    return _distance(as_polyline(p0).points, as_polyline(p1).points, False)
+    points0 = _kernel_points(as_polyline(p0))
+    points1 = _kernel_points(as_polyline(p1))
+    return _restricted_kernel(points0, points1, _UNRESTRICTED, math.inf)
 
 
 def restricted_hausdorff(
-    p0: Polyline | ArrayLike, p1: Polyline | ArrayLike, mode: str = "vertex"
+    p0: Polyline | ArrayLike,
+    p1: Polyline | ArrayLike,
+    mode: str = "vertex",
+    *,
+    limit: float = math.inf,
 ) -> float:
     """Return the restricted Hausdorff distance ``hausdorff(P0|P1, P1|P0)``.
 
@@ -459,6 +149,10 @@ def restricted_hausdorff(
         Polylines or ``(N, 2)`` arrays.
     mode
         Restriction mode, ``"vertex"`` (paper) or ``"projection"``; see :func:`restrict`.
+    limit
+        A gate (m): once the distance is known to exceed it, the search stops and returns
+        the value found so far, a lower bound above ``limit``. So ``result <= limit``
+        decides a gate exactly as the full distance does, at a fraction of the cost.
 
     Examples
     --------
@@ -468,59 +162,403 @@ def restricted_hausdorff(
     4.001
     >>> round(restricted_hausdorff(wall, part, mode="projection"), 3)
     0.08
+    >>> restricted_hausdorff(wall, part, limit=0.1) > 0.1  # stops early, same decision
+    True
     """
-    return _restricted_distance(as_polyline(p0), as_polyline(p1), mode)
+    code = _mode_code(mode)
+    points0 = _kernel_points(as_polyline(p0))
+    points1 = _kernel_points(as_polyline(p1))
+    return _restricted_kernel(points0, points1, code, float(limit))
 
 
-def _projection_rows(rows0: list[list[float]], rows1: list[list[float]]) -> list[list[float]]:
-    """Return the vertices of the ``"projection"`` restriction ``P0|P1`` with Python floats.
+def pairwise_restricted_hausdorff(
+    points0: np.ndarray,
+    bounds0: np.ndarray,
+    points1: np.ndarray,
+    bounds1: np.ndarray,
+    pairs: np.ndarray,
+    mode: str = "vertex",
+    *,
+    limit: float = math.inf,
+) -> np.ndarray:
+    """Return :func:`restricted_hausdorff` of many polyline pairs in one call.
 
-    The steps of :func:`_restricted`, for polylines of a few vertices.
+    The polylines of each side are given one after the other: polyline ``k`` of side 0
+    is ``points0[bounds0[k]:bounds0[k + 1]]``.
+
+    Parameters
+    ----------
+    points0, points1
+        ``(N0, 2)`` and ``(N1, 2)`` float64 vertices of all polylines of each side.
+    bounds0, bounds1
+        ``(K0 + 1,)`` and ``(K1 + 1,)`` int64 non-decreasing offsets, from 0 to ``N``.
+    pairs
+        ``(P, 2)`` int64 ``(polyline of side 0, polyline of side 1)`` pairs.
+    mode, limit
+        As in :func:`restricted_hausdorff` (``limit`` applies to every pair).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(P,)`` distances in metres.
+
+    Examples
+    --------
+    >>> walls = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 1.0], [4.0, 1.0]])
+    >>> seen = np.array([[1.0, 0.05], [3.0, 0.05]])
+    >>> pairs = np.array([[0, 0], [1, 0]])
+    >>> pairwise_restricted_hausdorff(walls, np.array([0, 2, 4]), seen, np.array([0, 2]),
+    ...                               pairs, "projection").round(3)
+    array([0.05, 0.95])
     """
-    if len(rows0) < 2 or not rows1:
-        return rows0
-    segments = _python_segments(rows0)
-    lengths = [math.hypot(dx, dy) for _, _, dx, dy, _, _, _ in segments]
-    arc = [0.0, *itertools.accumulate(lengths)]
-    positions, cuts = [], []
-    for px, py in rows1:
-        # The nearest segment (the lowest on ties) and where along it, as _Segments does.
-        best, segment, fraction = math.inf, 0, 0.0
-        for k, (ax, ay, dx, dy, inverse, bx, by) in enumerate(segments):
-            ox, oy = px - ax, py - ay
-            t = (ox * dx + oy * dy) * inverse
-            if t >= 1.0:
-                t, distance = 1.0, math.hypot(px - bx, py - by)
-            elif t > 0.0:
-                distance = math.hypot(ox - t * dx, oy - t * dy)
-            else:
-                t, distance = 0.0, math.hypot(ox, oy)
+    code = _mode_code(mode)
+    return _pairwise_kernel(
+        np.array(points0, dtype=np.float64, order="C").reshape(-1, 2),
+        np.asarray(bounds0, dtype=np.int64),
+        np.array(points1, dtype=np.float64, order="C").reshape(-1, 2),
+        np.asarray(bounds1, dtype=np.int64),
+        np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
+        code,
+        float(limit),
+    )
+
+
+def _mode_code(mode: str) -> int:
+    code = _MODES.get(mode)
+    if code is None:
+        raise ValueError(f"restrict: mode must be one of {tuple(_MODES)}, got {mode!r}")
+    return code
+
+
+def _kernel_points(polyline: Polyline) -> np.ndarray:
+    """Return a polyline's vertices as the one array type the kernels are compiled for.
+
+    A C-contiguous writeable float64 array: numba compiles one specialisation per array
+    layout and write flag, so views (reversed polylines) and read-only arrays are copied
+    (a few vertices) rather than compiled for again.
+    """
+    return np.array(polyline.points, dtype=np.float64, order="C")
+
+
+@numba.njit(cache=True)
+def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  # pragma: no cover
+    """Return the restricted distances of concatenated polyline pairs (mode code)."""
+    distances = np.empty(pairs.shape[0])
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        # Leading-axis slices of C arrays stay C arrays: the same specialisation.
+        distances[p] = _restricted_kernel(
+            points0[bounds0[a] : bounds0[a + 1]], points1[bounds1[b] : bounds1[b + 1]], mode, limit
+        )
+    return distances
+
+
+@numba.njit(cache=True)
+def _segment_table(points):  # pragma: no cover - compiled
+    """Return ``(S, 7)`` rows ``(ax, ay, dx, dy, 1 / length^2, bx, by)`` of the segments.
+
+    A single vertex is one null segment (``1 / length^2`` is 0 for null segments, so the
+    projection parameter is 0 and the distance the one to the start point).
+    """
+    count = max(points.shape[0] - 1, 1)
+    table = np.empty((count, 7))
+    for k in range(count):
+        end = min(k + 1, points.shape[0] - 1)
+        ax, ay = points[k, 0], points[k, 1]
+        bx, by = points[end, 0], points[end, 1]
+        dx, dy = bx - ax, by - ay
+        length2 = dx * dx + dy * dy
+        table[k, 0] = ax
+        table[k, 1] = ay
+        table[k, 2] = dx
+        table[k, 3] = dy
+        table[k, 4] = 1.0 / length2 if length2 > 0.0 else 0.0
+        table[k, 5] = bx
+        table[k, 6] = by
+    return table
+
+
+@numba.njit(cache=True, inline="always")
+def _to_segment(px, py, table, k):  # pragma: no cover - compiled
+    """Return ``(distance, t)`` from a point to segment ``k`` of ``table``.
+
+    ``t`` in ``[0, 1]`` is where along the segment the nearest point lies. A point whose
+    nearest point is a segment end gets exactly the distance to that end, so two segments
+    sharing a vertex tie exactly there (and the lower one wins every argmin).
+    """
+    ox, oy = px - table[k, 0], py - table[k, 1]
+    dx, dy = table[k, 2], table[k, 3]
+    t = (ox * dx + oy * dy) * table[k, 4]
+    if t >= 1.0:
+        return math.hypot(px - table[k, 5], py - table[k, 6]), 1.0
+    if t > 0.0:
+        return math.hypot(ox - t * dx, oy - t * dy), t
+    return math.hypot(ox, oy), 0.0
+
+
+@numba.njit(cache=True)
+def _distance_rows(points, table):  # pragma: no cover - compiled
+    """Return the ``(N, S)`` distances from every point to every segment of ``table``."""
+    rows = np.empty((points.shape[0], table.shape[0]))
+    for v in range(points.shape[0]):
+        for k in range(table.shape[0]):
+            rows[v, k], _ = _to_segment(points[v, 0], points[v, 1], table, k)
+    return rows
+
+
+@numba.njit(cache=True, inline="always")
+def _row_min(row, first, stop):  # pragma: no cover - compiled
+    """Return the minimum of ``row[first:stop]`` and its first position (from ``first``)."""
+    best = row[first]
+    where = 0
+    for k in range(first + 1, stop):
+        if row[k] < best:
+            best = row[k]
+            where = k - first
+    return best, where
+
+
+@numba.njit(cache=True)
+def _span_of_rows(rows):  # pragma: no cover - compiled
+    """Return the first and last vertex spanned by each row's nearest (lowest) segment."""
+    low = rows.shape[1]
+    high = -1
+    for v in range(rows.shape[0]):
+        _, nearest = _row_min(rows[v], 0, rows.shape[1])
+        low = min(low, nearest)
+        high = max(high, nearest)
+    return low, high + 1
+
+
+@numba.njit(cache=True)
+def _vertex_span(points0, points1):  # pragma: no cover - compiled
+    """Return the first and last vertex of ``P0|P1`` in ``"vertex"`` mode (eq. 3)."""
+    return _span_of_rows(_distance_rows(points1, _segment_table(points0)))
+
+
+@numba.njit(cache=True)
+def _projection_cut(points0, points1):  # pragma: no cover - compiled
+    """Return the vertices of the ``"projection"`` restriction ``P0|P1`` and their sources.
+
+    ``sources`` are positions into ``points0``: a kept vertex's own, and for each cut point
+    the nearer vertex of the segment it lies on. Needs ``len(points0) >= 2`` and a
+    non-empty ``points1``.
+    """
+    table = _segment_table(points0)
+    arc = np.empty(points0.shape[0])
+    arc[0] = 0.0
+    for k in range(table.shape[0]):
+        arc[k + 1] = arc[k] + math.hypot(table[k, 2], table[k, 3])
+    count = points1.shape[0]
+    positions = np.empty(count)
+    segments = np.empty(count, np.int64)
+    fractions = np.empty(count)
+    for v in range(count):
+        # The nearest segment, the lowest on ties.
+        best = math.inf
+        for k in range(table.shape[0]):
+            distance, t = _to_segment(points1[v, 0], points1[v, 1], table, k)
             if distance < best:
-                best, segment, fraction = distance, k, t
-        positions.append(arc[segment] + fraction * lengths[segment])
-        cuts.append((segment, fraction))
+                best = distance
+                segments[v] = k
+                fractions[v] = t
+        segment = segments[v]
+        positions[v] = arc[segment] + fractions[v] * (arc[segment + 1] - arc[segment])
+    first = np.argmin(positions)
+    last = np.argmax(positions)
+    start, stop = positions[first], positions[last]
+    inside = 0
+    if stop > start:
+        for k in range(points0.shape[0]):
+            if start < arc[k] < stop:
+                inside += 1
+    size = 1 if stop == start else inside + 2
+    vertices = np.empty((size, 2))
+    sources = np.empty(size, np.int64)
+    written = 0
+    for end in range(2 if size > 1 else 1):
+        vertex = first if end == 0 else last
+        segment, fraction = segments[vertex], fractions[vertex]
+        slot = 0 if end == 0 else size - 1
+        for axis in range(2):
+            a = points0[segment, axis]
+            vertices[slot, axis] = a + fraction * (points0[segment + 1, axis] - a)
+        sources[slot] = segment + 1 if fraction >= 0.5 else segment
+        if end == 0 and size > 1:
+            for k in range(points0.shape[0]):
+                if start < arc[k] < stop:
+                    written += 1
+                    vertices[written, 0] = points0[k, 0]
+                    vertices[written, 1] = points0[k, 1]
+                    sources[written] = k
+    return vertices, sources
 
-    def cut(vertex: int) -> list[float]:
-        segment, fraction = cuts[vertex]
-        (ax, ay), (bx, by) = rows0[segment], rows0[segment + 1]
-        return [ax + fraction * (bx - ax), ay + fraction * (by - ay)]
 
-    start, stop = min(positions), max(positions)
-    first, last = positions.index(start), positions.index(stop)
-    if stop == start:
-        return [cut(first)]
-    inside = [row for row, at in zip(rows0, arc, strict=True) if start < at < stop]
-    return [cut(first), *inside, cut(last)]
+@numba.njit(cache=True)
+def _restricted_kernel(points0, points1, mode, limit):  # pragma: no cover - compiled
+    """Return the (restricted) Hausdorff distance of two polylines as continuous curves.
+
+    ``mode`` 0: no restriction; 1: ``"vertex"``; 2: ``"projection"``. Returns as soon as
+    the best distance found exceeds ``limit`` (then a lower bound above ``limit``).
+    """
+    if points0.shape[0] == 0 or points1.shape[0] == 0:
+        return math.inf
+    cut0, cut1 = points0, points1
+    if mode == 2:
+        if points0.shape[0] >= 2:
+            cut0, _ = _projection_cut(points0, points1)
+        if points1.shape[0] >= 2:
+            cut1, _ = _projection_cut(points1, points0)
+    # One call site with a run-time flag: a literal argument would compile the (large)
+    # branch and bound a second time, specialised on the literal.
+    return _branch_and_bound(cut0, cut1, mode == 1, limit)
 
 
-def _restricted_distance(p0: Polyline, p1: Polyline, mode: str, limit: float = math.inf) -> float:
-    """Return :func:`restricted_hausdorff`, or any value above ``limit`` once it is known."""
-    if mode == "vertex":
-        return _distance(p0.points, p1.points, True, limit)
-    if mode == "projection" and len(p0) * len(p1) <= PYTHON_PAIRS:
-        rows0, rows1 = p0.points.tolist(), p1.points.tolist()
-        cut0, cut1 = _projection_rows(rows0, rows1), _projection_rows(rows1, rows0)
-        return _hausdorff_python(cut0, cut1, False, limit)
-    points0, _ = _restricted(p0, p1, mode)
-    points1, _ = _restricted(p1, p0, mode)
-    return _distance(points0, points1, False, limit)
+@numba.njit(cache=True)
+def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no cover
+    """Return the symmetric Hausdorff distance of two non-empty polylines (continuous).
+
+    With ``vertex_restricted`` both are first restricted to each other (eq. 3); the
+    vertex-to-segment distances that choose the restriction are the same that start the
+    distance computation.
+
+    Both directed distances are found together by branch and bound along the edges of
+    the source curve, in rounds. On a piece ``[a, b]`` of an edge the distance ``d_j`` to
+    each target segment is convex, hence below its chord; for the segments ``i`` and ``j``
+    nearest to ``a`` and ``b``, the maximum of ``f = min_j d_j`` on the piece is at most
+    the crossing value of their chords (``max(f(a), f(b))`` when ``i`` serves both ends).
+    Pieces whose bound beats the best value found by more than ``HAUSDORFF_TOLERANCE``
+    are split at the chord crossing, which is exact when both distances are linear (to
+    segment interiors). Every ``d_j`` is 1-Lipschitz, so the bound exceeds ``f(a)`` by at
+    most the piece length: halving after ``_CHORD_SPLITS`` rounds ends the search.
+    """
+    count0, count1 = points0.shape[0], points1.shape[0]
+    table0, table1 = _segment_table(points0), _segment_table(points1)
+    to1 = _distance_rows(points0, table1)
+    to0 = _distance_rows(points1, table0)
+    # Vertex range [low, high] of each polyline taking part; the vertices of each measure
+    # against the other polyline's segments [first, stop).
+    low0, high0, low1, high1 = 0, count0 - 1, 0, count1 - 1
+    first1, stop1, first0, stop0 = 0, table1.shape[0], 0, table0.shape[0]
+    if vertex_restricted and count0 >= 2 and count1 >= 2:
+        low0, high0 = _span_of_rows(to0)
+        low1, high1 = _span_of_rows(to1)
+        first1, stop1, first0, stop0 = low1, high1, low0, high0
+    nearest0 = np.empty(count0)
+    argmin0 = np.empty(count0, np.int64)
+    for v in range(count0):
+        nearest0[v], argmin0[v] = _row_min(to1[v], first1, stop1)
+    nearest1 = np.empty(count1)
+    argmin1 = np.empty(count1, np.int64)
+    for v in range(count1):
+        nearest1[v], argmin1[v] = _row_min(to0[v], first0, stop0)
+    best = max(nearest0[low0 : high0 + 1].max(), nearest1[low1 : high1 + 1].max())
+    if best > limit:
+        return best
+    # A piece of an edge: its ends, the distances there to the target segments, their
+    # minima, and which polyline it belongs to. An edge whose ends have the same nearest
+    # segment is settled from the start (its bound is the larger end value, already in
+    # ``best``), so it is not even a piece.
+    widths = (stop1 - first1, stop0 - first0)
+    width = max(widths[0], widths[1])
+    count = 0
+    for v in range(low0, high0):
+        count += argmin0[v] != argmin0[v + 1]
+    for v in range(low1, high1):
+        count += argmin1[v] != argmin1[v + 1]
+    ends = np.empty((count, 4))
+    lows = np.empty((count, width))
+    highs = np.empty((count, width))
+    values = np.empty((count, 2))
+    sides = np.empty(count, np.int64)
+    piece = 0
+    for side in range(2):
+        points = points0 if side == 0 else points1
+        rows = to1 if side == 0 else to0
+        argmins = argmin0 if side == 0 else argmin1
+        nearest = nearest0 if side == 0 else nearest1
+        first = first1 if side == 0 else first0
+        low, high = (low0, high0) if side == 0 else (low1, high1)
+        for v in range(low, high):
+            if argmins[v] != argmins[v + 1]:
+                ends[piece, 0], ends[piece, 1] = points[v, 0], points[v, 1]
+                ends[piece, 2], ends[piece, 3] = points[v + 1, 0], points[v + 1, 1]
+                lows[piece, : widths[side]] = rows[v, first : first + widths[side]]
+                highs[piece, : widths[side]] = rows[v + 1, first : first + widths[side]]
+                values[piece, 0], values[piece, 1] = nearest[v], nearest[v + 1]
+                sides[piece] = side
+                piece += 1
+    rounds = 0
+    while count > 0:
+        middles = np.empty((count, 2))
+        distances = np.empty((count, width))
+        minima = np.empty(count)
+        open_ = np.zeros(count, np.bool_)
+        found = False
+        round_best = best
+        kept = 0
+        for p in range(count):
+            side = sides[p]
+            size = widths[side]
+            fa, fb = values[p, 0], values[p, 1]
+            _, i = _row_min(lows[p], 0, size)
+            _, j = _row_min(highs[p], 0, size)
+            # Chord of d_i runs from fa to end_i; chord of d_j from start_j to fb.
+            end_i, start_j = highs[p, i], lows[p, j]
+            lead = start_j - fa
+            crossing = lead / ((end_i - fb) + lead + _TINY)  # in [0, 1]; 0 when i == j
+            bound = max(fa + crossing * (end_i - fa), fb)
+            if bound <= best + HAUSDORFF_TOLERANCE:
+                continue
+            found = True
+            split = crossing if rounds < _CHORD_SPLITS else 0.5
+            split = min(max(split, _MIN_SPLIT), 1.0 - _MIN_SPLIT)
+            mx = ends[p, 0] + split * (ends[p, 2] - ends[p, 0])
+            my = ends[p, 1] + split * (ends[p, 3] - ends[p, 1])
+            middles[p, 0], middles[p, 1] = mx, my
+            table = table1 if side == 0 else table0
+            first = first1 if side == 0 else first0
+            for k in range(size):
+                distances[p, k], _ = _to_segment(mx, my, table, first + k)
+            minima[p], _ = _row_min(distances[p], 0, size)
+            round_best = max(round_best, minima[p])
+            # A piece whose new point comes within the tolerance of its bound is settled:
+            # with linear distances (segment interiors) the chord crossing is the maximum.
+            if minima[p] < bound - HAUSDORFF_TOLERANCE:
+                open_[p] = True
+                kept += 1
+        if not found:
+            return best
+        # The whole round is bounded against the best value from before it.
+        best = round_best
+        if best > limit:
+            return best
+        next_ends = np.empty((2 * kept, 4))
+        next_lows = np.empty((2 * kept, width))
+        next_highs = np.empty((2 * kept, width))
+        next_values = np.empty((2 * kept, 2))
+        next_sides = np.empty(2 * kept, np.int64)
+        q = 0
+        for p in range(count):
+            if not open_[p]:
+                continue
+            for half in range(2):
+                next_sides[q] = sides[p]
+                if half == 0:
+                    next_ends[q, 0], next_ends[q, 1] = ends[p, 0], ends[p, 1]
+                    next_ends[q, 2], next_ends[q, 3] = middles[p, 0], middles[p, 1]
+                    next_lows[q] = lows[p]
+                    next_highs[q] = distances[p]
+                    next_values[q, 0], next_values[q, 1] = values[p, 0], minima[p]
+                else:
+                    next_ends[q, 0], next_ends[q, 1] = middles[p, 0], middles[p, 1]
+                    next_ends[q, 2], next_ends[q, 3] = ends[p, 2], ends[p, 3]
+                    next_lows[q] = distances[p]
+                    next_highs[q] = highs[p]
+                    next_values[q, 0], next_values[q, 1] = minima[p], values[p, 1]
+                q += 1
+        ends, lows, highs, values, sides, count = (
+            next_ends, next_lows, next_highs, next_values, next_sides, 2 * kept
+        )
+        rounds += 1
+    return best

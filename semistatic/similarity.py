@@ -18,6 +18,9 @@ Degenerate polylines (fewer than two distinct vertices, i.e. zero length) have n
 their tangent function is empty and their similarity to anything is ``inf``, so an
 association never picks them on shape.
 
+One compiled kernel (numba) builds a tangent function and one takes the integral,
+whatever the size.
+
 Examples
 --------
 >>> corner = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
@@ -29,14 +32,13 @@ Examples
 
 from __future__ import annotations
 
-import itertools
 import math
-from bisect import bisect_right
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.frames import wrap_angle
+from semistatic.frames import wrap_angle_compiled
 from semistatic.polyline import Polyline, as_polyline
 
 __all__ = ["similarity", "tangent_function"]
@@ -46,13 +48,8 @@ __all__ = ["similarity", "tangent_function"]
 # does), for as long as the polyline lives.
 _CACHE_KEY = "_tangent_function"
 
-# Up to this many vertices the tangent function is built with Python floats, and up to
-# this many breakpoints in the union of two the integral is taken with them too: numpy
-# costs about 1 us per call whatever the size, Python about 0.3 us per edge.
-PYTHON_VERTICES = 48
-
-# A tangent function as plain lists: (breaks, angles, length).
-_Tangent = tuple[list[float], list[float], float]
+# A tangent function: (breaks, angles, length), both arrays read-only.
+_Tangent = tuple[np.ndarray, np.ndarray, float]
 
 
 def _tangent(polyline: Polyline | ArrayLike) -> _Tangent:
@@ -67,60 +64,83 @@ def _tangent(polyline: Polyline | ArrayLike) -> _Tangent:
 
 
 def _compute_tangent(points: np.ndarray) -> _Tangent:
-    """Return the tangent function of ``(N, 2)`` vertices the cheaper way for the size."""
-    if points.shape[0] <= PYTHON_VERTICES:
-        return _tangent_lists(points.tolist())
-    breaks, angles, total = _tangent_arrays(points)
-    return breaks.tolist(), angles.tolist(), total
+    breaks, angles, total = _tangent_kernel(np.array(points, dtype=np.float64, order="C"))
+    breaks.flags.writeable = False
+    angles.flags.writeable = False
+    return breaks, angles, total
 
 
-def _tangent_lists(rows: list[list[float]]) -> _Tangent:
-    """Return the tangent function of vertices ``rows`` with Python floats."""
-    lengths, directions = [], []
-    for (x0, y0), (x1, y1) in itertools.pairwise(rows):
-        dx, dy = x1 - x0, y1 - y0
+@numba.njit(cache=True)
+def _tangent_kernel(points):  # pragma: no cover - compiled
+    """Return ``(breaks, angles, length)`` of ``(N, 2)`` vertices."""
+    count = max(points.shape[0] - 1, 0)
+    lengths = np.empty(count)
+    angles = np.empty(count)
+    edges = 0
+    for k in range(count):
+        dx = points[k + 1, 0] - points[k, 0]
+        dy = points[k + 1, 1] - points[k, 1]
         length = math.hypot(dx, dy)
         # Zero-length edges (repeated vertices) have no direction and no extent: skip them.
         if length > 0.0:
-            lengths.append(length)
-            directions.append(math.atan2(dy, dx))
-    if not lengths:
-        return [0.0], [], 0.0
-    # Unwrap: each turn in (-pi, pi], added up along the polyline.
-    first = directions[0]
-    angles, swept = [first], 0.0
-    for previous, direction in itertools.pairwise(directions):
-        swept += wrap_angle(direction - previous)
-        angles.append(first + swept)
-    arcs, total = [0.0], 0.0
-    for length in lengths:
-        total += length
-        arcs.append(total)
-    breaks = [arc / total for arc in arcs]
-    breaks[-1] = 1.0
-    return breaks, angles, total
-
-
-def _tangent_arrays(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Return the tangent function of ``(N, 2)`` vertices with numpy (for long polylines)."""
-    edges = points[1:] - points[:-1]
-    lengths = np.hypot(edges[:, 0], edges[:, 1])
-    # The same steps as _tangent_lists, on arrays.
-    proper = lengths > 0.0
-    if not proper.all():
-        edges, lengths = edges[proper], lengths[proper]
-    total = float(lengths.sum())
-    if edges.shape[0] == 0:
+            lengths[edges] = length
+            angles[edges] = math.atan2(dy, dx)
+            edges += 1
+    if edges == 0:
         return np.zeros(1), np.zeros(0), 0.0
-    angles = np.arctan2(edges[:, 1], edges[:, 0])
-    turns = np.pi - np.mod(np.pi - (angles[1:] - angles[:-1]), 2.0 * np.pi)
-    angles[1:] = angles[0] + np.cumsum(turns)
-    breaks = np.empty(lengths.size + 1)
+    # Unwrap: each turn in (-pi, pi], added up along the polyline.
+    directions = angles[:edges].copy()
+    swept = 0.0
+    for k in range(1, edges):
+        swept += wrap_angle_compiled(directions[k] - directions[k - 1])
+        angles[k] = directions[0] + swept
+    breaks = np.empty(edges + 1)
     breaks[0] = 0.0
-    np.cumsum(lengths, out=breaks[1:])
-    breaks /= total
-    breaks[-1] = 1.0
-    return breaks, angles, total
+    total = 0.0
+    for k in range(edges):
+        total += lengths[k]
+        breaks[k + 1] = total
+    for k in range(edges):
+        breaks[k] /= total
+    breaks[edges] = 1.0
+    return breaks, angles[:edges].copy(), total
+
+
+@numba.njit(cache=True)
+def _integral_kernel(breaks0, angles0, breaks1, angles1):  # pragma: no cover - compiled
+    """Return ``integral (T1 - T0 - theta_0)^2 ds`` of two tangent functions."""
+    # Between consecutive breakpoints of the union both step functions are constant; a
+    # repeated breakpoint only adds an interval of zero width. On [u_k, u_k+1) edge j of a
+    # polyline applies when j of its inner breaks are at or before u_k.
+    size0, size1 = breaks0.size, breaks1.size
+    union = np.empty(size0 + size1)
+    first, second = 0, 0
+    for k in range(union.size):  # merge the two sorted break lists
+        if second >= size1 or (first < size0 and breaks0[first] <= breaks1[second]):
+            union[k] = breaks0[first]
+            first += 1
+        else:
+            union[k] = breaks1[second]
+            second += 1
+    count = union.size - 1
+    widths = np.empty(count)
+    differences = np.empty(count)
+    edge0, edge1 = 0, 0
+    theta_0 = 0.0
+    for k in range(count):
+        at = union[k]
+        while edge0 < size0 - 2 and breaks0[edge0 + 1] <= at:
+            edge0 += 1
+        while edge1 < size1 - 2 and breaks1[edge1 + 1] <= at:
+            edge1 += 1
+        widths[k] = union[k + 1] - at
+        differences[k] = angles1[edge1] - angles0[edge0]
+        theta_0 += widths[k] * differences[k]
+    integral = 0.0
+    for k in range(count):
+        residual = differences[k] - theta_0
+        integral += widths[k] * (residual * residual)
+    return integral
 
 
 def tangent_function(polyline: Polyline | ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -151,9 +171,6 @@ def tangent_function(polyline: Polyline | ArrayLike) -> tuple[np.ndarray, np.nda
     (array([0.]), array([], dtype=float64))
     """
     breaks, angles, _ = _tangent(polyline)
-    breaks, angles = np.array(breaks), np.array(angles, dtype=np.float64)
-    breaks.flags.writeable = False
-    angles.flags.writeable = False
     return breaks, angles
 
 
@@ -187,42 +204,5 @@ def similarity(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
     breaks1, angles1, length1 = _tangent(p1)
     if length0 == 0.0 or length1 == 0.0:
         return math.inf
-    if len(breaks0) + len(breaks1) <= PYTHON_VERTICES:
-        integral = _integral_lists(breaks0, angles0, breaks1, angles1)
-    else:
-        integral = _integral_arrays(
-            np.array(breaks0), np.array(angles0), np.array(breaks1), np.array(angles1)
-        )
+    integral = _integral_kernel(breaks0, angles0, breaks1, angles1)
     return integral * max(length1 / length0, length0 / length1)
-
-
-def _integral_lists(
-    breaks0: list[float], angles0: list[float], breaks1: list[float], angles1: list[float]
-) -> float:
-    """Return ``integral (T1 - T0 - theta_0)^2 ds`` with Python floats."""
-    # Between consecutive breakpoints of the union both step functions are constant; a
-    # repeated breakpoint only adds an interval of zero width. On [u_k, u_k+1) edge j of a
-    # polyline applies when j of its inner breaks are at or before u_k.
-    union = sorted(breaks0 + breaks1)
-    inner0, inner1 = breaks0[1:-1], breaks1[1:-1]
-    widths = [b - a for a, b in itertools.pairwise(union)]
-    differences = [
-        angles1[bisect_right(inner1, at)] - angles0[bisect_right(inner0, at)] for at in union[:-1]
-    ]
-    theta_0 = sum(w * d for w, d in zip(widths, differences, strict=True))
-    residuals = [d - theta_0 for d in differences]
-    return sum(w * (r * r) for w, r in zip(widths, residuals, strict=True))
-
-
-def _integral_arrays(
-    breaks0: np.ndarray, angles0: np.ndarray, breaks1: np.ndarray, angles1: np.ndarray
-) -> float:
-    """Return ``integral (T1 - T0 - theta_0)^2 ds`` with numpy (for long polylines)."""
-    union = np.sort(np.concatenate((breaks0, breaks1)))
-    width = np.diff(union)
-    index0 = np.searchsorted(breaks0[1:-1], union[:-1], side="right")
-    index1 = np.searchsorted(breaks1[1:-1], union[:-1], side="right")
-    difference = angles1[index1] - angles0[index0]
-    theta_0 = float(width @ difference)
-    residual = difference - theta_0
-    return float(width @ (residual * residual))

@@ -1,11 +1,11 @@
-"""The Python-float fast paths give what the vectorised paths give.
+"""The remaining fast paths give what the slow paths give.
 
-Small polylines (a handful of vertices, the common case in a mapper update) go through
-plain-Python twins of the numpy code in ``hausdorff``, ``similarity``, ``extraction``
-(Douglas-Peucker) and ``merge``. Each twin is checked here against its vectorised or GEOS
-counterpart on seeded random inputs, and the whole mapper against itself with every fast
-path switched off. So is the association's shortcut past the similarities when the gate
-alone fixes the optimal path.
+Small polylines go through plain-Python twins of the Douglas-Peucker code in
+``extraction`` and ``merge``; each twin is checked here against GEOS on seeded random
+inputs, and the whole mapper against itself with those fast paths and the association's
+shortcut past the similarities (when the gate alone fixes the optimal path) switched off.
+(``hausdorff``, ``similarity`` and ``association`` have one compiled implementation each,
+tested against their references in their own test modules.)
 """
 
 from __future__ import annotations
@@ -31,8 +31,6 @@ from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
 # The package re-exports functions named like these modules: import the modules by name.
-hausdorff_module = importlib.import_module("semistatic.hausdorff")
-similarity_module = importlib.import_module("semistatic.similarity")
 merge_module = importlib.import_module("semistatic.merge")
 extraction_module = importlib.import_module("semistatic.extraction")
 association_module = importlib.import_module("semistatic.association")
@@ -46,139 +44,6 @@ def _random_polyline(rng, count, spread=1.0):
     """A random walk of ``count`` vertices; every fourth one on a 0.1 grid (exact ties)."""
     points = np.cumsum(rng.normal(0.0, spread, (count, 2)), axis=0)
     return points.round(1) if rng.integers(4) == 0 else points
-
-
-def _pairs(seed):
-    """Random polyline pairs: unrelated, a noisy copy, a partial noisy copy, a point."""
-    rng = np.random.default_rng(seed)
-    first = _random_polyline(rng, int(rng.integers(1, 9)))
-    kind = seed % 4
-    if kind == 0:
-        second = _random_polyline(rng, int(rng.integers(1, 9)))
-    elif kind == 1:
-        second = first + rng.normal(0.0, 0.03, first.shape)
-    elif kind == 2:
-        second = first[: max(1, first.shape[0] // 2)] + rng.normal(0.0, 0.03, (1, 2))
-    else:
-        second = rng.normal(0.0, 1.0, (1, 2))
-    return first, second
-
-
-@pytest.mark.parametrize("seed", range(120))
-def test_hausdorff_python_twin_equals_the_vectorised_branch_and_bound(seed):
-    first, second = _pairs(seed)
-    for points0, points1 in ((first, second), (second, first)):
-        for restricted in (False, True):
-            fast = hausdorff_module._hausdorff_python(
-                points0.tolist(), points1.tolist(), restricted, math.inf
-            )
-            slow = hausdorff_module._hausdorff_core(points0, points1, restricted)
-            assert fast == pytest.approx(slow, abs=ROUNDING)
-
-
-@pytest.mark.parametrize("seed", range(120))
-def test_projection_restriction_twin_equals_the_vectorised_one(seed):
-    first, second = _pairs(seed)
-    for points0, points1 in ((first, second), (second, first)):
-        fast = hausdorff_module._projection_rows(points0.tolist(), points1.tolist())
-        slow, _ = hausdorff_module._restricted(Polyline(points0), Polyline(points1), "projection")
-        np.testing.assert_allclose(np.array(fast).reshape(-1, 2), slow, rtol=0.0, atol=ROUNDING)
-    fast = hausdorff_module._restricted_distance(Polyline(first), Polyline(second), "projection")
-    cut0, _ = hausdorff_module._restricted(Polyline(first), Polyline(second), "projection")
-    cut1, _ = hausdorff_module._restricted(Polyline(second), Polyline(first), "projection")
-    assert fast == pytest.approx(hausdorff_module._hausdorff_core(cut0, cut1, False), abs=ROUNDING)
-
-
-@pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
-def test_hausdorff_python_twin_survives_nasty_polylines(name):
-    nasty = NASTY_POLYLINES[name]
-    other = np.array([[0.0, 1.0], [1.0, 1.5], [2.0, 1.0]])
-    for restricted in (False, True):
-        fast = hausdorff_module._hausdorff_python(
-            nasty.tolist(), other.tolist(), restricted, math.inf
-        )
-        slow = hausdorff_module._hausdorff_core(nasty, other, restricted)
-        assert fast == pytest.approx(slow, abs=ROUNDING) or fast == slow == math.inf
-    for points0, points1 in ((nasty, other), (other, nasty)):
-        fast = hausdorff_module._projection_rows(points0.tolist(), points1.tolist())
-        slow, _ = hausdorff_module._restricted(Polyline(points0), Polyline(points1), "projection")
-        np.testing.assert_allclose(np.array(fast).reshape(-1, 2), slow, rtol=0.0, atol=ROUNDING)
-
-
-def test_large_polylines_take_the_vectorised_path_and_agree():
-    rng = np.random.default_rng(3)
-    line = _random_polyline(rng, 40, spread=0.3)
-    noisy = line + rng.normal(0.0, 0.02, line.shape)
-    assert line.shape[0] * noisy.shape[0] > hausdorff_module.PYTHON_PAIRS
-    fast = hausdorff_module._hausdorff_python(line.tolist(), noisy.tolist(), True, math.inf)
-    assert hausdorff_module.restricted_hausdorff(line, noisy) == pytest.approx(fast, abs=ROUNDING)
-
-
-@pytest.mark.parametrize("seed", range(60))
-@pytest.mark.parametrize("mode", ["vertex", "projection"])
-def test_gate_limit_stops_early_with_the_same_decision(seed, mode):
-    first, second = _pairs(seed)
-    p0, p1 = Polyline(first), Polyline(second)
-    exact = hausdorff_module.restricted_hausdorff(p0, p1, mode=mode)
-    for gate in (0.01, 0.05, 0.12, 0.5, 2.0):
-        limited = hausdorff_module._restricted_distance(p0, p1, mode, limit=gate)
-        assert (limited <= gate) == (exact <= gate)
-        if exact <= gate:
-            assert limited == exact
-        else:
-            assert limited <= exact + hausdorff_module.HAUSDORFF_TOLERANCE
-
-
-@pytest.mark.parametrize("seed", range(60))
-def test_tangent_lists_equal_tangent_arrays(seed):
-    rng = np.random.default_rng(seed)
-    points = _random_polyline(rng, int(rng.integers(1, 12)))
-    if seed % 5 == 0:
-        points = np.repeat(points, 2, axis=0)  # zero-length edges
-    breaks, angles, total = similarity_module._tangent_lists(points.tolist())
-    array_breaks, array_angles, array_total = similarity_module._tangent_arrays(points)
-    np.testing.assert_allclose(breaks, array_breaks, rtol=0.0, atol=ROUNDING)
-    np.testing.assert_allclose(angles, array_angles, rtol=0.0, atol=ROUNDING)
-    assert total == pytest.approx(array_total, rel=ROUNDING)
-
-
-@pytest.mark.parametrize("seed", range(60))
-def test_similarity_integral_lists_equal_arrays(seed):
-    rng = np.random.default_rng(seed)
-    tangents = [
-        similarity_module._tangent_lists(_random_polyline(rng, int(rng.integers(2, 12))).tolist())
-        for _ in range(2)
-    ]
-    (breaks0, angles0, _), (breaks1, angles1, _) = tangents
-    if not (angles0 and angles1):
-        pytest.skip("a zero-length polyline has no tangent function")
-    fast = similarity_module._integral_lists(breaks0, angles0, breaks1, angles1)
-    slow = similarity_module._integral_arrays(
-        np.array(breaks0), np.array(angles0), np.array(breaks1), np.array(angles1)
-    )
-    assert fast == pytest.approx(slow, rel=1e-9, abs=ROUNDING)
-
-
-def test_long_polylines_take_the_array_path_and_agree():
-    rng = np.random.default_rng(8)
-    long_line = _random_polyline(rng, similarity_module.PYTHON_VERTICES + 10)
-    short_line = _random_polyline(rng, 5)
-    breaks, angles, _ = similarity_module._tangent(Polyline(long_line))
-    list_breaks, list_angles, _ = similarity_module._tangent_lists(long_line.tolist())
-    np.testing.assert_allclose(breaks, list_breaks, atol=ROUNDING)
-    np.testing.assert_allclose(angles, list_angles, atol=ROUNDING)
-    slow = similarity_module.similarity(long_line, short_line)
-    tangent0 = similarity_module._tangent_lists(long_line.tolist())
-    tangent1 = similarity_module._tangent_lists(short_line.tolist())
-    fast = similarity_module._integral_lists(tangent0[0], tangent0[1], tangent1[0], tangent1[1])
-    assert slow == pytest.approx(fast * max(tangent0[2] / tangent1[2], tangent1[2] / tangent0[2]))
-
-
-def test_tangent_function_is_cached_on_the_polyline():
-    line = Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
-    first = similarity_module._tangent(line)
-    assert similarity_module._tangent(line) is first
-    assert similarity_module._tangent(line.points) is not first  # arrays are not cached
 
 
 @pytest.mark.parametrize("seed", range(150))
@@ -295,12 +160,8 @@ def test_mapper_with_all_fast_paths_off_gives_the_same_map(monkeypatch):
     ]
     fast_map, fast_reports = _run(scans, poses)
     assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
-    monkeypatch.setattr(hausdorff_module, "PYTHON_PAIRS", 0)
-    monkeypatch.setattr(similarity_module, "PYTHON_VERTICES", 0)
     monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
     monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
-    monkeypatch.setattr(association_module, "PYTHON_CCW_VERTICES", 0)
-    monkeypatch.setattr(association_module, "PYTHON_BOX_PAIRS", 0)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
         assert [(a.scan_index, a.map_id) for a in fast.associated] == [
@@ -406,9 +267,11 @@ def test_forced_path_needs_one_best_path():
     line = Polyline([[0.0, 0.0], [1.0, 0.0]])
     # All four pairs can pass: the diagonal and the two L-shaped paths differ only by the
     # similarities, so they must be computed.
-    assert association_module._forced_path(two_ways, [line, line], [line, line]) is None
+    points = np.concatenate((line.points, line.points))
+    bounds = np.array([0, 2, 4])
+    assert association_module._forced_path(two_ways, points, bounds, points, bounds) is None
     diagonal = np.eye(2, dtype=bool)
-    assert association_module._forced_path(diagonal, [line, line], [line, line]) == [
+    assert association_module._forced_path(diagonal, points, bounds, points, bounds) == [
         (0, 0),
         (1, 1),
     ]
@@ -448,32 +311,19 @@ def test_polyline_boxes_equal_numpy_bounds(seed):
     assert Polyline(np.empty((0, 2))).box == EMPTY_BOX
 
 
-@pytest.mark.parametrize("seed", range(40))
-def test_ccw_summary_twin_equals_the_vectorised_one(seed, monkeypatch):
-    rng = np.random.default_rng(seed)
-    lines = [
-        Polyline(rng.normal(0.0, 2.0, (int(rng.integers(1, 6)), 2)))
-        for _ in range(int(rng.integers(1, 5)))
-    ]
-    pose = np.array([*rng.normal(0.0, 0.5, 2), rng.uniform(-math.pi, math.pi)])
-    fast = association_module._ccw_summary(lines, pose)
-    monkeypatch.setattr(association_module, "PYTHON_CCW_VERTICES", 0)
-    slow = association_module._ccw_summary(lines, pose)
-    assert fast[1] == slow[1]
-    np.testing.assert_allclose(fast[0], slow[0], rtol=0.0, atol=ROUNDING)
-
-
 @pytest.mark.parametrize("seed", range(30))
-def test_near_boxes_twin_equals_box_gaps(seed, monkeypatch):
+def test_near_boxes_equal_shapely_box_distances(seed):
     rng = np.random.default_rng(seed)
     lines = [Polyline(rng.normal(0.0, 1.0, (2, 2)) * 0.3 + rng.normal(0.0, 1.0, 2))
              for _ in range(6)] + [Polyline(np.empty((0, 2)))]
     boxes = [line.box for line in lines]
     gate = float(rng.uniform(0.05, 0.5))
-    expected = (association_module.box_gaps(boxes, boxes) <= gate).tolist()
-    assert association_module._near_boxes(boxes, boxes, gate) == expected
-    monkeypatch.setattr(association_module, "PYTHON_BOX_PAIRS", 0)
-    assert association_module._near_boxes(boxes, boxes, gate) == expected
+    shapes = [shapely.box(*box) if box != EMPTY_BOX else None for box in boxes]
+    expected = [
+        [a is not None and b is not None and shapely.distance(a, b) <= gate for b in shapes]
+        for a in shapes
+    ]
+    assert (association_module.box_gaps(boxes, boxes) <= gate).tolist() == expected
 
 
 @pytest.mark.parametrize("seed", range(40))

@@ -220,3 +220,75 @@ def test_arrays_and_polylines_agree():
     assert restricted_hausdorff(Polyline(points0), Polyline(points1)) == pytest.approx(
         restricted_hausdorff(points0, points1), abs=0.0
     )
+
+
+def _random_pair(seed):
+    """Random polylines of 1-8 vertices: unrelated, a noisy copy, a partial copy, a point."""
+    rng = np.random.default_rng(seed)
+    first = np.cumsum(rng.normal(0.0, 1.0, (int(rng.integers(1, 9)), 2)), axis=0)
+    if seed % 5 == 0:
+        first = first.round(1)  # exact ties between segments
+    kind = seed % 4
+    if kind == 0:
+        second = np.cumsum(rng.normal(0.0, 1.0, (int(rng.integers(1, 9)), 2)), axis=0)
+    elif kind == 1:
+        second = first + rng.normal(0.0, 0.03, first.shape)
+    elif kind == 2:
+        second = first[: max(1, first.shape[0] // 2)] + rng.normal(0.0, 0.03, (1, 2))
+    else:
+        second = rng.normal(0.0, 1.0, (1, 2))
+    return first, second
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_small_random_pairs_match_the_slow_reference_in_both_modes(seed):
+    points0, points1 = _random_pair(seed)
+    for a, b in ((points0, points1), (points1, points0)):
+        # Restricting to (or restricting) a single point changes nothing (the convention).
+        if len(a) >= 2 and len(b) >= 2:
+            a_cut, b_cut = _restrict_reference(a, b), _restrict_reference(b, a)
+        else:
+            a_cut, b_cut = a, b
+        vertex = _reference_hausdorff(a_cut, b_cut, 0.002)
+        assert restricted_hausdorff(a, b) == pytest.approx(vertex, abs=0.0011 + HAUSDORFF_TOLERANCE)
+        if len(a) >= 2 and len(b) >= 2:
+            a_cut, b_cut = _projection_reference(a, b), _projection_reference(b, a)
+            cut = _reference_hausdorff(a_cut, b_cut, 0.002)
+            assert restricted_hausdorff(a, b, mode="projection") == pytest.approx(
+                cut, abs=0.0011 + HAUSDORFF_TOLERANCE
+            )
+
+
+def test_long_polylines_match_the_slow_reference():
+    rng = np.random.default_rng(3)
+    line = np.cumsum(rng.normal(0.0, 0.3, (40, 2)), axis=0)
+    noisy = line + rng.normal(0.0, 0.02, line.shape)
+    expected = _reference_hausdorff(
+        _restrict_reference(line, noisy), _restrict_reference(noisy, line), 0.002
+    )
+    assert restricted_hausdorff(line, noisy) == pytest.approx(expected, abs=0.0011)
+
+
+@pytest.mark.parametrize("seed", range(60))
+@pytest.mark.parametrize("mode", ["vertex", "projection"])
+def test_gate_limit_stops_early_with_the_same_decision(seed, mode):
+    first, second = _random_pair(seed)
+    p0, p1 = Polyline(first), Polyline(second)
+    exact = restricted_hausdorff(p0, p1, mode=mode)
+    for gate in (0.01, 0.05, 0.12, 0.5, 2.0):
+        limited = restricted_hausdorff(p0, p1, mode, limit=gate)
+        assert (limited <= gate) == (exact <= gate)
+        if exact <= gate:
+            assert limited == exact
+        else:
+            assert limited <= exact + HAUSDORFF_TOLERANCE
+
+
+def test_reversed_and_read_only_inputs_give_the_same_distance():
+    points0 = np.array([[0.0, 0.0], [1.0, 0.3], [2.0, 0.0], [3.0, 0.5]])
+    points1 = points0[1:3] + 0.04
+    line = Polyline(points0)  # read-only storage
+    reversed_view = Polyline._trusted(line.points[::-1], line.scan_indices[::-1])
+    expected = restricted_hausdorff(points0[::-1].copy(), points1)
+    assert restricted_hausdorff(reversed_view, points1) == expected
+    assert restricted_hausdorff(line, points1) == restricted_hausdorff(points0.copy(), points1)

@@ -161,3 +161,31 @@ def test_traversal_direction_matters():
     # copy of a bent line is a different tangent function.
     bent = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 1.0]])
     assert similarity(bent, bent[::-1]) > 0.1
+
+
+def test_tangent_function_is_computed_once_per_polyline():
+    line = Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    first = tangent_function(line)
+    second = tangent_function(line)
+    assert first[0] is second[0]
+    assert first[1] is second[1]
+    assert tangent_function(line.points)[0] is not first[0]  # arrays are not cached
+
+
+def _long_integer_polyline(rng, count):
+    """``count`` edges of integer length 0-3 turning by less than 170 deg at each vertex."""
+    lengths = rng.integers(0, 4, count)
+    lengths[0] = 1
+    angles = np.cumsum(rng.uniform(-2.9, 2.9, count))
+    steps = lengths[:, None] * np.column_stack((np.cos(angles), np.sin(angles)))
+    points = np.vstack(([0.0, 0.0], np.cumsum(steps, axis=0)))
+    return points, lengths.tolist(), angles.tolist()
+
+
+@pytest.mark.parametrize("count", [40, 120])
+def test_long_polylines_equal_the_exact_grid_integral(count):
+    rng = np.random.default_rng(count)
+    poly0 = _long_integer_polyline(rng, count)
+    poly1 = _long_integer_polyline(rng, count // 2)
+    expected = _grid_similarity(poly0, poly1)
+    assert similarity(poly0[0], poly1[0]) == pytest.approx(expected, rel=1e-6, abs=1e-9)
