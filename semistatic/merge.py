@@ -18,6 +18,10 @@ converge instead of drifting or growing:
   the map's end by ``alpha`` too, in whichever direction: ends neither ratchet outwards
   nor shrink. Only a scan that reaches farther than ``end_tolerance`` extends the map, and
   only a scan that stops short of it leaves the map's end alone (a partial view).
+- a map edge that cuts a corner (the lines of its neighbouring edges meet within
+  ``epsilon`` of a scan vertex farther than ``epsilon`` from the edge) is no surface: the
+  scan's corner is averaged with that intersection, not with its foot on the edge, so a
+  corner that the first views cut is learnt however many observations the map holds.
 
 Examples
 --------
@@ -32,6 +36,7 @@ array([[0.   , 0.005],
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 from collections.abc import Sequence
@@ -47,6 +52,7 @@ from semistatic.extraction import (
     douglas_peucker,
     douglas_peucker_rows,
 )
+from semistatic.fitting import MIN_CORNER_SINE
 from semistatic.hausdorff import restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline
 
@@ -422,7 +428,7 @@ def _merge_rows(
         return _simplified(_extend_with_point(new, old[0], tolerance), epsilon)
     if len(new) == 1:
         return _simplified(_extend_with_point(old, new[0], tolerance), epsilon)
-    return _simplified(_merged(old, new, alpha, tolerance), epsilon)
+    return _simplified(_merged(old, new, alpha, tolerance, epsilon), epsilon)
 
 
 def _cut_at(vertices: list[list[float]], arc: float, keep_head: bool) -> list[list[float]]:
@@ -503,9 +509,35 @@ def _contradicted(
     return cut if len(cut) >= 2 else None
 
 
+def _cut_corner(
+    vertices: list[list[float]], map_arcs: list[float], arc: float, point: list[float],
+    epsilon: float,
+) -> list[float] | None:
+    """Return the corner a map edge cuts off where the scan sees it, or ``None``.
+
+    The map edge at arc length ``arc`` is a chord across a corner when the lines of the
+    edges before and after it meet within ``epsilon`` of ``point`` (the scan's vertex
+    there): the map's own faces run on to where the scan sees them meet. Their
+    intersection is returned. A corner's first views can cut it like that: one face seen
+    at grazing incidence from afar, with a reading or two on it.
+    """
+    edge = bisect.bisect_right(map_arcs, arc) - 1
+    if not 1 <= edge <= len(vertices) - 3:
+        return None
+    (ax, ay), (bx, by) = vertices[edge - 1], vertices[edge]
+    (cx, cy), (dx, dy) = vertices[edge + 1], vertices[edge + 2]
+    ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
+    cross = ux * vy - uy * vx
+    if abs(cross) <= MIN_CORNER_SINE * math.hypot(ux, uy) * math.hypot(vx, vy):
+        return None  # nearly parallel faces meet nowhere useful
+    t = ((cx - ax) * vy - (cy - ay) * vx) / cross
+    corner = [ax + t * ux, ay + t * uy]
+    return corner if math.dist(corner, point) <= epsilon else None
+
+
 def _merged(
     old: list[list[float]], new: list[list[float]], alpha: float, tolerance: float,
-    cut: bool = True,
+    epsilon: float, cut: bool = True,
 ) -> list[list[float]]:
     """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 each)."""
     on_map = _found(new, old)
@@ -519,7 +551,7 @@ def _merged(
         new = new[::-1]
         on_map = tuple(values[::-1] for values in on_map)  # type: ignore[assignment]
     if cut and (kept := _contradicted(old, new, on_map, tolerance)) is not None:
-        return _merged(kept, new, alpha, tolerance, cut=False)
+        return _merged(kept, new, alpha, tolerance, epsilon, cut=False)
     arcs, feet, distances, before, after = on_map
     _, scan_feet, scan_distances, scan_before, scan_after = _found(old, new)
 
@@ -562,9 +594,22 @@ def _merged(
     # Map vertices first on equal arc length, then scan vertices in scan order: the keys
     # (arc, 0 or 1, index) are unique, so the vertices themselves are never compared.
     middle = [((map_arcs[k], 0, k), vertex) for k, vertex in enumerate(moved)]
+    # An inner scan vertex farther than epsilon from a map edge that cuts a corner is
+    # averaged with the corner the map's faces imply, not with its foot on the chord:
+    # pulled toward the chord, it would lie within epsilon of it once the map stands for
+    # a few observations, Douglas-Peucker would drop it every time, and the map could
+    # never learn the corner.
+    anchors = [
+        _cut_corner(old, map_arcs, arcs[k], new[k], epsilon)
+        if inserted[k] and 0 < k < count - 1 and distances[k] > epsilon else None
+        for k in range(count)
+    ]
     middle += [
         ((arcs[k], 1, k), [foot_x + alpha * (x - foot_x), foot_y + alpha * (y - foot_y)])
-        for k, ((x, y), (foot_x, foot_y)) in enumerate(zip(new, feet, strict=True))
+        for k, ((x, y), (foot_x, foot_y)) in enumerate(
+            (vertex, foot if anchor is None else anchor)
+            for vertex, foot, anchor in zip(new, feet, anchors, strict=True)
+        )
         if inserted[k]
     ]
     middle.sort()

@@ -269,3 +269,30 @@ def test_an_end_the_scan_contradicts_is_cut_and_the_scan_extends_the_map():
     np.testing.assert_allclose(merged.points, [[0.0, 0.0], [2.0, 0.0]], atol=1e-12)
     # a partial view that agrees everywhere leaves the corner alone
     assert len(merge(corner, [[0.2, 0.01], [0.8, 0.01]], epsilon=0.03)) == 3
+
+
+def _farthest_from(outline: shapely.Geometry, line: Polyline) -> float:
+    """Return the largest distance (m) of a point of ``line`` from ``outline`` (shapely)."""
+    probes = shapely.get_coordinates(shapely.segmentize(shapely.LineString(line.points), 0.005))
+    return float(shapely.distance(outline, shapely.points(probes)).max())
+
+
+# sim2's carton_bend, lap 1: its first views, from 3 m away along its front face, saw
+# its top face at grazing incidence and cut the corner between them; every later view
+# saw the corner, yet the map, standing for hundreds of observations, kept the chord.
+BOX_OUTLINE = shapely.box(0.0, -0.5, 0.5, 0.0).exterior  # the corner at the origin
+CORNER = shapely.Point(0.0, 0.0)
+
+
+def test_a_map_edge_cutting_a_corner_gives_way_to_the_corner_the_scans_see():
+    chord = Polyline([[0.0, -0.5], [0.0, -0.07], [0.14, 0.0], [0.5, 0.0]])
+    assert shapely.distance(CORNER, shapely.LineString(chord.points)) > 2 * EPSILON
+    line = chord
+    rng = np.random.default_rng(1)
+    for hits in range(200, 210):
+        seen = np.array([[0.0, -0.45], [0.0, 0.0], [0.45, 0.0]])
+        line = merge(line, seen + rng.normal(0.0, 0.003, seen.shape), EPSILON,
+                     map_weight=float(hits))
+    assert shapely.distance(CORNER, shapely.LineString(line.points)) < 0.01
+    assert _farthest_from(BOX_OUTLINE, line) < 0.01
+
