@@ -37,6 +37,7 @@ from robots.follower import ChainedFormFollower
 from scenarios.load import load_scenario
 from scenarios.observers import ScanCallback
 from scenarios.runner import run_scenario
+from scenarios.vehicle import Vehicle
 from semistatic.local_map import LocalMap
 from semistatic.mapper import PolylineMap
 from sim.client import SimClient
@@ -50,11 +51,11 @@ pytestmark = pytest.mark.bench
 STAGES = (
     (RaycastLaser, "cast", "ray cast (PyBullet rayTestBatch + hit lists)"),
     (RaycastLaser, "scan", "laser scan (cast + noise)"),
-    (testbench_module._Robot, "landmarks", "landmark detection"),
-    (testbench_module.Testbench, "_predict", "odometry + EKF predict"),
+    (Vehicle, "landmarks", "landmark detection"),
+    (Vehicle, "_predict", "odometry + EKF predict"),
     (EKFLocalizer, "update", "EKF update (gate + filterpy)"),
     (ChainedFormFollower, "command", "follower command"),
-    (testbench_module.Testbench, "_supervise_and_map", "safety supervision + mapper"),
+    (Vehicle, "_supervise_and_map", "safety supervision + mapper"),
     (LocalMap, "update", "mapper (local map update)"),
     (SimClient, "step", "physics step (PyBullet)"),
     (ContactMonitor, "check", "contact check"),
