@@ -56,6 +56,7 @@ __all__ = [
     "ProgressReporter",
     "ScanCallback",
     "Table1Reference",
+    "hook_table",
     "moved_boxes",
 ]
 
@@ -64,6 +65,34 @@ OBSERVED_READINGS = 5
 
 OBSERVED_DISTANCE = 0.03
 """Metres from a true box outline within which a reading counts as a hit on the box."""
+
+
+HOOKS = ("on_tick", "on_scan", "on_lap_start", "on_lap_end")
+"""The points of the closed loop where observers are called (module docstring)."""
+
+
+def hook_table(observers: list) -> dict:
+    """Return each hook's bound methods among ``observers``, and ``"wants_polylines"``.
+
+    Built once per observer set by whoever calls the observers (the bench, a fleet's
+    vehicle), so the per-scan path does not ask every observer again. ``"wants_polylines"``
+    says whether an ``on_scan`` observer may read ``ScanRecord.polylines`` (observers say
+    ``reads_map_polylines = False`` to spare the map copy).
+
+    Examples
+    --------
+    >>> class Counter:
+    ...     reads_map_polylines = False
+    ...     def on_scan(self, bench, record): ...
+    >>> table = hook_table([Counter()])
+    >>> len(table["on_scan"]), len(table["on_tick"]), table["wants_polylines"]
+    (1, 0, False)
+    """
+    table: dict = {hook: [getattr(o, hook) for o in observers if hasattr(o, hook)]
+                   for hook in HOOKS}
+    table["wants_polylines"] = any(getattr(o, "reads_map_polylines", True)
+                                   for o in observers if hasattr(o, "on_scan"))
+    return table
 
 
 GUI_REFRESH_HZ = 4.0

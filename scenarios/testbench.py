@@ -48,7 +48,7 @@ import numpy as np
 from robots.presets import UGVSpec
 from scenarios.layout import lap_worlds, robot_preset
 from scenarios.load import load_scenario
-from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference
+from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference, hook_table
 from scenarios.policies import FieldPolicy
 from scenarios.records import LapLog, RunLog, Schedule, combine_logs
 from scenarios.routes import fleet_vehicles, route_from
@@ -215,9 +215,10 @@ class Testbench:
         """Give every vehicle of a fleet its own scoring (and publishing) observers."""
         names = [segment.name for segment in self.segments]
         for vehicle in self.fleet:
-            vehicle.observers += [GroundTruthScoring(), Table1Reference()]
+            vehicle.add_observer(GroundTruthScoring())
+            vehicle.add_observer(Table1Reference())
             if self.store is not None:
-                vehicle.observers.append(
+                vehicle.add_observer(
                     SegmentPublisher(self.store, vehicle.index, segment_names=names))
 
     def segment_key(self, name: str) -> int:
@@ -489,16 +490,7 @@ class Testbench:
     def observer_hooks(self, name: str) -> Any:
         """Return the bench observers' ``name`` hooks, or ``"wants_polylines"``; cached."""
         if self._hooks is None:
-            self._hooks = {
-                hook: [getattr(o, hook) for o in self.observers if hasattr(o, hook)]
-                for hook in ("on_tick", "on_scan", "on_lap_start", "on_lap_end")
-            }
-            # Whether an ``on_scan`` observer may read ``ScanRecord.polylines``.
-            self._hooks["wants_polylines"] = any(
-                getattr(observer, "reads_map_polylines", True)
-                for observer in self.observers
-                if hasattr(observer, "on_scan")
-            )
+            self._hooks = hook_table(self.observers)
         return self._hooks[name]
 
     def _apply_layout(self, layout: WorldSpec) -> None:

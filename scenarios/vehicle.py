@@ -47,6 +47,7 @@ from robots.landmarks import detect_landmarks
 from robots.lasers import LaserSpec
 from robots.presets import UGVSpec
 from robots.safety import FieldState, SafetyPolicy, SafetySupervisor, scan_points_in_robot_frame
+from scenarios.observers import hook_table
 from scenarios.policies import FieldView, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord
 from scenarios.segments import PathSegment, path_segments, segment_index
@@ -111,7 +112,8 @@ class Vehicle:
     Attributes
     ----------
     observers
-        Observers called with this vehicle (a fleet's scoring); a single vehicle reports
+        Observers called with this vehicle (a fleet's scoring; add with
+        :meth:`add_observer`); a single vehicle reports
         to the bench's observers instead.
     """
 
@@ -123,6 +125,7 @@ class Vehicle:
         self.robot = robot
         self.store = store
         self.observers: list = []
+        self._hooks: dict | None = None
         spec = bench.log_spec
         sim, world = bench.sim, bench.world
         path = build_spline(route.path)
@@ -281,24 +284,28 @@ class Vehicle:
         ]
 
     # ------------------------------------------------------------------ observers
-    def _listeners(self, hook: str) -> list:
-        """Return ``(callable, target)`` for hook ``hook`` of everyone listening to this vehicle."""
-        bench = self.bench
-        own = [(getattr(o, hook), self) for o in self.observers if hasattr(o, hook)]
-        if self.index == 0:
-            # The bench's observers follow the first vehicle (bench.true_pose is its pose).
-            own += [(method, bench) for method in bench.observer_hooks(hook)]
-        return own
+    def add_observer(self, observer) -> None:
+        """Call ``observer``'s hooks with this vehicle (see :mod:`scenarios.observers`)."""
+        self.observers.append(observer)
+        self._hooks = None
+
+    def _own_hooks(self, name: str):
+        if self._hooks is None:
+            self._hooks = hook_table(self.observers)
+        return self._hooks[name]
 
     def _wants_polylines(self) -> bool:
-        mine = any(getattr(o, "reads_map_polylines", True)
-                   for o in self.observers if hasattr(o, "on_scan"))
-        return mine or (self.index == 0 and self.bench.observer_hooks("wants_polylines"))
+        return self._own_hooks("wants_polylines") or (
+            self.index == 0 and self.bench.observer_hooks("wants_polylines"))
 
     def emit(self, hook: str, *args) -> None:
-        """Call every listener's ``hook`` with its target (bench or vehicle) and ``args``."""
-        for method, target in self._listeners(hook):
-            method(target, *args)
+        """Call the vehicle's observers' ``hook`` with it, then (first vehicle) the bench's."""
+        for method in self._own_hooks(hook):
+            method(self, *args)
+        if self.index == 0:
+            # The bench's observers follow the first vehicle (bench.true_pose is its pose).
+            for method in self.bench.observer_hooks(hook):
+                method(self.bench, *args)
 
     # ------------------------------------------------------------------ one tick
     def sense_and_command(self, control_due: bool, localization_due: bool,
