@@ -21,12 +21,11 @@ import shapely
 
 from semistatic.association import FAR_COST, _optimal_path
 from semistatic.extraction import douglas_peucker_rows
-from semistatic.frames import untransform_points
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, _replaced
 from semistatic.polyline import EMPTY_BOX, Polyline
 from semistatic.types import Scan
-from semistatic.visibility import expected_ranges, extend_ends, visible_beams
+from semistatic.visibility import extend_ends
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
@@ -324,24 +323,6 @@ def test_near_boxes_equal_shapely_box_distances(seed):
         for a in shapes
     ]
     assert (association_module.box_gaps(boxes, boxes) <= gate).tolist() == expected
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_visible_beams_in_the_sector_equal_all_beams(seed):
-    rng = np.random.default_rng(seed)
-    world = scene(box(tuple(rng.uniform(-3.0, 3.0, 2)), 1.0, 0.6, rng.uniform(0, 3)),
-                  wall((-4.0, 2.5), (4.0, 2.5)))
-    pose = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-math.pi, math.pi)])
-    scan = cast_scan(world, pose, noise=0.01, rng=rng)
-    # A polyline anywhere around the sensor, behind it (across the +-pi cut) included.
-    line = Polyline(rng.uniform(-4.0, 4.0, (int(rng.integers(2, 6)), 2)))
-    counts = visible_beams(line, scan, pose, margin=0.15)
-    expected = expected_ranges(untransform_points(pose, line.points), scan.angles())
-    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= scan.range_max)
-    with np.errstate(invalid="ignore"):
-        unoccluded = in_view & (scan.ranges >= expected - 0.15)
-        seen_through = unoccluded & (scan.ranges > expected + 0.15)
-    assert tuple(counts) == (in_view.sum(), unoccluded.sum(), seen_through.sum())
 
 
 def test_keep_box_prefilter_changes_nothing(monkeypatch):
