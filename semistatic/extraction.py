@@ -10,8 +10,8 @@ The pipeline is a handful of vectorised numpy passes over the beams:
    breakpoints and at gaps of missing readings (DESIGN.md detail 2).
 4. :func:`douglas_peucker` - keep the vertices GEOS keeps (DESIGN.md detail 3).
 
-:func:`extract_polylines` chains them and simplifies every interval of a scan in one
-GEOS call.
+:func:`extract_polylines` chains them; one compiled Douglas-Peucker (GEOS's recursion and
+arithmetic) simplifies every interval of a scan, and the merge's polylines too.
 
 Examples
 --------
@@ -26,8 +26,8 @@ from __future__ import annotations
 import functools
 import math
 
+import numba
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.fitting import fit_polylines
@@ -39,7 +39,7 @@ from semistatic.types import Scan, beam_directions
 __all__ = [
     "MAX_BRIDGED_GAP",
     "douglas_peucker",
-    "douglas_peucker_rows",
+    "douglas_peucker_compiled",
     "extract_polylines",
     "remove_invalid",
     "remove_outliers",
@@ -58,11 +58,6 @@ FLAT_WINDOW_SIGMA = 1e-6
 # more missing beams in a row always break the polyline: something real is there
 # (an opening, glass, a far surface).
 MAX_BRIDGED_GAP = 1
-
-# Up to this many points one line is simplified with Python floats: a GEOS call costs
-# about 15 us in array conversions, the Python recursion about 0.3 us per point visited.
-PYTHON_DOUGLAS_PEUCKER = 16
-
 
 def remove_invalid(scan: Scan, max_range: float = math.inf) -> np.ndarray:
     """Return the boolean mask of usable beams of ``scan``.
@@ -278,45 +273,70 @@ def _douglas_peucker_lines(points: np.ndarray, line_ids: np.ndarray, epsilon: fl
     """Return the positions in ``points`` of the vertices Douglas-Peucker keeps, per line.
 
     ``points[k]`` belongs to line ``line_ids[k]`` (non-decreasing, at least two points per
-    line). GEOS simplifies all lines in one call. Its Douglas-Peucker measures XY
-    distances and copies the kept coordinates, Z included, so a Z holding each point's
-    position tells which points were kept: exactly GEOS's choice, at GEOS speed (about
-    ten times faster than the same algorithm level-by-level in numpy on a 541-beam scan).
+    line); all lines in one compiled call.
     """
-    xyz = np.column_stack((points, np.arange(points.shape[0], dtype=np.float64)))
-    lines = shapely.linestrings(xyz, indices=line_ids)
-    simplified = shapely.simplify(lines, epsilon, preserve_topology=False)
-    return shapely.get_coordinates(simplified, include_z=True)[:, 2].astype(np.int64)
+    ends = np.flatnonzero(np.diff(line_ids)).astype(np.int64)
+    return _douglas_peucker_kept(np.ascontiguousarray(points), ends, epsilon)
 
 
-def douglas_peucker_rows(rows: list[list[float]], epsilon: float) -> list[int]:
-    """Return the indices :func:`douglas_peucker` keeps, with Python floats (>= 1 row).
+@numba.njit(cache=True)
+def _douglas_peucker_kept(
+    points: np.ndarray, ends: np.ndarray, epsilon: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the kept positions of lines ending at ``ends`` and at the last point."""
+    keep = np.zeros(points.shape[0], dtype=np.bool_)
+    if points.shape[0] == 0:
+        return np.flatnonzero(keep)
+    first = 0
+    for k in range(ends.size + 1):
+        last = ends[k] if k < ends.size else points.shape[0] - 1
+        _keep_douglas_peucker(points, first, last, epsilon, keep)
+        first = last + 1
+    return np.flatnonzero(keep)
 
-    GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
-    operation) and rules (the first farthest point on ties, kept only when strictly
-    farther than ``epsilon``): the same vertices, and for a few points faster than a GEOS
-    call. For callers that hold a few finite vertices as lists (a merge) and a checked
-    ``epsilon >= 0``; :func:`douglas_peucker` checks its input and picks the faster way.
+
+@numba.njit(cache=True)
+def douglas_peucker_compiled(points: np.ndarray, epsilon: float) -> np.ndarray:
+    """Return :func:`douglas_peucker` of finite ``(N, 2)`` points inside compiled kernels.
+
+    No checks: for callers that hold finite vertices and a checked ``epsilon >= 0``.
 
     Examples
     --------
-    >>> douglas_peucker_rows([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0]], 0.05)
-    [0, 2, 3]
+    >>> douglas_peucker_compiled(np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0]]),
+    ...                          0.05)
+    array([0, 2, 3])
     """
-    keep = [True] * len(rows)
-    sections = [(0, len(rows) - 1)]
-    while sections:
-        first, last = sections.pop()
-        if first + 1 >= last:
+    return _douglas_peucker_kept(points, np.empty(0, np.int64), epsilon)
+
+
+@numba.njit(cache=True)
+def _keep_douglas_peucker(
+    points: np.ndarray, first: int, last: int, epsilon: float, keep: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """Mark in ``keep`` the points ``first..last`` that Douglas-Peucker keeps.
+
+    GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
+    operation) and rules (the first farthest point on ties, kept only when strictly
+    farther than ``epsilon``), so the same vertices as ``shapely.simplify``.
+    """
+    keep[first] = keep[last] = True
+    sections = np.empty((max(last - first, 1), 2), np.int64)
+    sections[0, 0], sections[0, 1] = first, last
+    pending = 1
+    while pending:
+        pending -= 1
+        start, stop = sections[pending, 0], sections[pending, 1]
+        if start + 1 >= stop:
             continue
-        (ax, ay), (bx, by) = rows[first], rows[last]
+        ax, ay, bx, by = points[start, 0], points[start, 1], points[stop, 0], points[stop, 1]
         ex, ey = bx - ax, by - ay
         length2 = ex * ex + ey * ey
         point_segment = ax == bx and ay == by
         length = math.sqrt(length2)
-        farthest, index = -1.0, first
-        for k in range(first + 1, last):
-            px, py = rows[k]
+        farthest, index = -1.0, start
+        for k in range(start + 1, stop):
+            px, py = points[k, 0], points[k, 1]
             if point_segment:
                 distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
             else:
@@ -329,12 +349,11 @@ def douglas_peucker_rows(rows: list[list[float]], epsilon: float) -> list[int]:
                     distance = abs(((ay - py) * ex - (ax - px) * ey) / length2) * length
             if distance > farthest:
                 farthest, index = distance, k
-        if farthest <= epsilon:
-            keep[first + 1 : last] = [False] * (last - first - 1)
-        else:
-            sections.append((index, last))
-            sections.append((first, index))
-    return [k for k, kept in enumerate(keep) if kept]
+        if farthest > epsilon:
+            keep[index] = True
+            sections[pending, 0], sections[pending, 1] = index, stop
+            sections[pending + 1, 0], sections[pending + 1, 1] = start, index
+            pending += 2
 
 
 def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
@@ -343,8 +362,8 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     Keeps the first and last point, and recursively the farthest point of a section when
     its point-to-*segment* distance is strictly greater than ``epsilon`` (the first one on
     ties): exactly the vertices of
-    ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``, which does
-    the work (DESIGN.md detail 3), repeated and collinear points included.
+    ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``
+    (DESIGN.md detail 3), repeated and collinear points included, by one compiled kernel.
 
     Parameters
     ----------
@@ -364,16 +383,12 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     >>> douglas_peucker([[0, 0], [1, 0.01], [2, 0], [2, 1]], epsilon=0.05)
     array([0, 2, 3])
     """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    points = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
     if not epsilon >= 0.0:
         raise ValueError(f"douglas_peucker: epsilon must be >= 0 m, got {epsilon!r}")
     if not np.isfinite(points).all():
         raise ValueError("douglas_peucker: points must be finite; drop invalid readings first")
-    if points.shape[0] <= 2:
-        return np.arange(points.shape[0], dtype=np.int64)
-    if points.shape[0] <= PYTHON_DOUGLAS_PEUCKER:
-        return np.array(douglas_peucker_rows(points.tolist(), float(epsilon)), dtype=np.int64)
-    return _douglas_peucker_lines(points, np.zeros(points.shape[0], np.int64), float(epsilon))
+    return douglas_peucker_compiled(points, float(epsilon))
 
 
 def extract_polylines(
