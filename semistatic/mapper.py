@@ -62,7 +62,7 @@ from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
-    extend_ends,
+    extend_all_ends,
     missed_and_cut,
     missing_polylines,
 )
@@ -362,10 +362,10 @@ class PolylineMap:
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        observed = {
-            index: extend_ends(scan_lines[index], scan.angle_increment, viewpoint=pose)
-            for index in [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
-        }
+        indices = [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
+        observed = dict(zip(indices, extend_all_ends(
+            [scan_lines[index] for index in indices], scan.angle_increment, viewpoint=pose
+        ), strict=True))
         changed = self._merge_associated(observed, associated, stamp)
         seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
         cut_away = []

@@ -43,6 +43,7 @@ __all__ = [
     "MISSING_FRACTION",
     "BeamCounts",
     "expected_ranges",
+    "extend_all_ends",
     "extend_ends",
     "free_space_cut",
     "is_missing",
@@ -197,59 +198,83 @@ def extend_ends(
     array([[ 2.    , -0.0175],
            [ 2.    ,  1.022 ]])
     """
-    line = as_polyline(polyline)
-    origin = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    return _extended(line, angle_increment, origin[0], origin[1], limit)
+    return extend_all_ends([as_polyline(polyline)], angle_increment, viewpoint=viewpoint,
+                           limit=limit)[0]
 
 
-def _extended(
-    line: Polyline, angle_increment: float, origin_x: float, origin_y: float, limit: float
-) -> Polyline:
-    """Return :func:`extend_ends` of ``line`` seen from ``(origin_x, origin_y)``."""
-    rows, moved = _extended_rows(line.points.tolist(), angle_increment, origin_x, origin_y, limit)
-    return _observed(line, rows, moved)
+def extend_all_ends(
+    polylines: Sequence[Polyline],
+    angle_increment: float,
+    *,
+    viewpoint: ArrayLike = (0.0, 0.0),
+    limit: float = MAX_END_EXTENSION,
+) -> list[Polyline]:
+    """Return :func:`extend_ends` of many scan polylines of one scan, in one compiled call.
 
+    A polyline whose ends do not move is returned as itself.
 
-def _observed(line: Polyline, rows: list[list[float]], moved: bool) -> Polyline:
-    """Return ``line`` with the vertex rows of :func:`_extended_rows` (itself if unmoved)."""
-    if not moved:
-        return line
+    Examples
+    --------
+    >>> lines = [Polyline([[2.0, 0.0], [2.0, 1.0]]), Polyline([[1.0, 1.0]])]
+    >>> [line.points.round(4).tolist() for line in extend_all_ends(lines, np.radians(1.0))]
+    [[[2.0, -0.0175], [2.0, 1.022]], [[1.0, 1.0]]]
+    """
+    if not polylines:
+        return []
+    origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
+    offsets = np.zeros(len(polylines) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(line) for line in polylines])
+    points = np.concatenate([line.points for line in polylines])
+    moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
+    bounds = offsets.tolist()
     # Finite vertices moved by a finite shift: nothing to check.
-    return Polyline._trusted(np.array(rows, dtype=np.float64), line.scan_indices)
+    return [
+        Polyline._trusted(points[bounds[k] : bounds[k + 1]], line.scan_indices) if shifted
+        else line
+        for k, (line, shifted) in enumerate(zip(polylines, moved.tolist(), strict=True))
+    ]
 
 
-def _extended_rows(
-    rows: list[list[float]], angle_increment: float, origin_x: float, origin_y: float, limit: float
-) -> tuple[list[list[float]], bool]:
-    """Return :func:`extend_ends` of vertex ``rows`` (a new list) and whether an end moved."""
-    if len(rows) < 2:
-        return rows, False
-    rows = list(rows)
-    moved = False
-    for end, inner, beam_step in ((0, 1, -angle_increment), (-1, -2, angle_increment)):
-        (x, y), (inner_x, inner_y) = rows[end], rows[inner]
-        relative_x, relative_y = x - origin_x, y - origin_y
-        outward_x = relative_x - (inner_x - origin_x)
-        outward_y = relative_y - (inner_y - origin_y)
-        norm = math.hypot(outward_x, outward_y)
-        if norm == 0.0:
+@numba.njit(cache=True)
+def _extended_ends(
+    points: np.ndarray, offsets: np.ndarray, angle_increment: float, origin_x: float,
+    origin_y: float, limit: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Move the ends of the polylines packed in ``points`` (in place); return which moved.
+
+    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]``; see :func:`extend_ends`.
+    """
+    moved = np.zeros(offsets.size - 1, np.bool_)
+    for p in range(offsets.size - 1):
+        first, last = offsets[p], offsets[p + 1] - 1
+        if last - first < 1:
             continue
-        outward_x, outward_y = outward_x / norm, outward_y / norm
-        # Where does the neighbouring beam cross the line of the end edge?
-        beam = math.atan2(relative_y, relative_x) + beam_step
-        direction_x, direction_y = math.cos(beam), math.sin(beam)
-        across = direction_x * outward_y - direction_y * outward_x
-        if abs(across) <= PARALLEL_TOLERANCE:
-            continue
-        along_edge = (relative_x * direction_y - relative_y * direction_x) / across
-        along_beam = (relative_x * outward_y - relative_y * outward_x) / across
-        if along_edge <= 0.0 or along_beam <= 0.0:
-            continue
-        shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
-        if shift > 0.0:
-            rows[end] = [x + shift * outward_x, y + shift * outward_y]
-            moved = True
-    return rows, moved
+        for side in range(2):
+            end, inner = (first, first + 1) if side == 0 else (last, last - 1)
+            beam_step = -angle_increment if side == 0 else angle_increment
+            x, y = points[end, 0], points[end, 1]
+            relative_x, relative_y = x - origin_x, y - origin_y
+            outward_x = relative_x - (points[inner, 0] - origin_x)
+            outward_y = relative_y - (points[inner, 1] - origin_y)
+            norm = math.hypot(outward_x, outward_y)
+            if norm == 0.0:
+                continue
+            outward_x, outward_y = outward_x / norm, outward_y / norm
+            # Where does the neighbouring beam cross the line of the end edge?
+            beam = math.atan2(relative_y, relative_x) + beam_step
+            direction_x, direction_y = math.cos(beam), math.sin(beam)
+            across = direction_x * outward_y - direction_y * outward_x
+            if abs(across) <= PARALLEL_TOLERANCE:
+                continue
+            along_edge = (relative_x * direction_y - relative_y * direction_x) / across
+            along_beam = (relative_x * outward_y - relative_y * outward_x) / across
+            if along_edge <= 0.0 or along_beam <= 0.0:
+                continue
+            shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
+            if shift > 0.0:
+                points[end, 0], points[end, 1] = x + shift * outward_x, y + shift * outward_y
+                moved[p] = True
+    return moved
 
 
 class BeamCounts(NamedTuple):
