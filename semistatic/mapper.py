@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
 from semistatic.extraction import extract_polylines
-from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observation
+from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observations
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
@@ -523,15 +523,16 @@ class PolylineMap:
         for pair in associated:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
         epsilon = self.params.epsilon
-        tolerance = END_TOLERANCE_FACTOR * epsilon
-        for map_id, scan_indices in by_map.items():
-            entry = self._entries[map_id]
-            line = entry.polyline
-            line = merge_observation(
-                line, [observed[index] for index in scan_indices], epsilon,
-                map_weight=float(min(entry.hits, MAX_MERGE_WEIGHT)), end_tolerance=tolerance,
-            )
-            self._entries[map_id] = _replaced(
+        entries = [self._entries[map_id] for map_id in by_map]
+        merged = merge_observations(
+            [entry.polyline for entry in entries],
+            [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
+            epsilon,
+            map_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
+            end_tolerance=END_TOLERANCE_FACTOR * epsilon,
+        )
+        for entry, line in zip(entries, merged, strict=True):
+            self._entries[entry.id] = _replaced(
                 entry,
                 polyline=line,
                 status="confirmed",

@@ -56,6 +56,7 @@ __all__ = [
     "join",
     "merge",
     "merge_observation",
+    "merge_observations",
     "overlaps",
     "project_onto",
 ]
@@ -273,8 +274,8 @@ def merge(
     >>> len(merge(box, [[0.4, 0.01], [0.6, -0.01]], epsilon=0.03))  # a partial view
     3
     """
-    return _merged_parts("merge", map_polyline, [scan_polyline], epsilon, map_weight,
-                         end_tolerance)
+    return _merged_parts("merge", [map_polyline], [[scan_polyline]], epsilon, [map_weight],
+                         end_tolerance)[0]
 
 
 def merge_observation(
@@ -299,33 +300,122 @@ def merge_observation(
     array([[0.  , 0.01],
            [4.  , 0.01]])
     """
-    return _merged_parts("merge_observation", map_polyline, parts, epsilon, map_weight,
-                         end_tolerance)
+    return _merged_parts("merge_observation", [map_polyline], [parts], epsilon, [map_weight],
+                         end_tolerance)[0]
+
+
+def merge_observations(
+    map_polylines: Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
+    epsilon: float,
+    *,
+    map_weights: Sequence[float],
+    end_tolerance: float | None = None,
+) -> list[Polyline]:
+    """Return :func:`merge_observation` of many map polylines, in one compiled call.
+
+    ``observations[k]`` are the scan polylines one scan associated with
+    ``map_polylines[k]``, which stands for ``map_weights[k]`` observations. A map
+    polyline whose observation has no vertices is returned as itself.
+
+    Examples
+    --------
+    >>> walls = [[[0.0, 0.0], [2.0, 0.0]], [[0.0, 1.0], [2.0, 1.0]]]
+    >>> seen = [[[[0.0, 0.02], [2.0, 0.02]]], [[[0.0, 1.02], [3.0, 1.02]]]]
+    >>> [line.points.round(3).tolist()
+    ...  for line in merge_observations(walls, seen, 0.03, map_weights=[1.0, 3.0])]
+    [[[0.0, 0.01], [2.0, 0.01]], [[0.0, 1.005], [3.0, 1.02]]]
+    """
+    return _merged_parts("merge_observations", map_polylines, observations, epsilon,
+                         map_weights, end_tolerance)
 
 
 def _merged_parts(
     caller: str,
-    map_polyline: Polyline | ArrayLike,
-    parts: Sequence[Polyline | ArrayLike],
+    map_polylines: Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
     epsilon: float,
-    map_weight: float,
+    map_weights: Sequence[float],
     end_tolerance: float | None,
-) -> Polyline:
-    """Return :func:`merge_observation` with its parameters checked once for ``caller``."""
+) -> list[Polyline]:
+    """Return :func:`merge_observations` with its parameters checked once for ``caller``."""
     if not epsilon > 0.0:
         raise ValueError(f"{caller}: epsilon must be > 0 m, got {epsilon!r}")
-    if not map_weight >= 0.0:
-        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weight!r}")
+    weights = np.asarray(map_weights, dtype=float).reshape(-1)
+    if not (weights >= 0.0).all():
+        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights!r}")
     tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
     if not tolerance >= 0.0:
         raise ValueError(f"{caller}: end_tolerance must be >= 0 m, got {end_tolerance!r}")
-    alpha = 1.0 / (1.0 + map_weight) if math.isfinite(map_weight) else 0.0
-    line = as_polyline(map_polyline)
-    for part in parts:
-        scan = as_polyline(part).points
-        if scan.shape[0]:  # an empty scan polyline leaves the map polyline itself
-            line = _polyline(_merge_vertices(line.points, scan, alpha, tolerance, epsilon))
-    return line
+    lines = [as_polyline(line) for line in map_polylines]
+    if not (len(lines) == len(observations) == weights.size):
+        raise ValueError(
+            f"{caller}: need one observation and one weight per map polyline, got "
+            f"{len(lines)} polylines, {len(observations)} observations, {weights.size} weights"
+        )
+    with np.errstate(divide="ignore"):
+        alphas = np.where(np.isfinite(weights), 1.0 / (1.0 + weights), 0.0)
+    parts = [[as_polyline(part).points for part in parts] for parts in observations]
+    # Packed: polyline k is points[offsets[k]:offsets[k + 1]], its parts the pieces
+    # part_offsets[first[k]:first[k + 1] + 1] of part_points.
+    sizes = [len(line) for line in lines]
+    part_sizes = [part.shape[0] for line_parts in parts for part in line_parts]
+    points = _packed([line.points for line in lines])
+    part_points = _packed([part for line_parts in parts for part in line_parts])
+    merged, merged_offsets, changed = _merge_all(
+        points, _offsets(sizes), part_points, _offsets(part_sizes),
+        _offsets([len(line_parts) for line_parts in parts]), alphas, tolerance, epsilon,
+    )
+    bounds = merged_offsets.tolist()
+    return [
+        _polyline(merged[bounds[k] : bounds[k + 1]]) if is_changed else line
+        for k, (line, is_changed) in enumerate(zip(lines, changed.tolist(), strict=True))
+    ]
+
+
+def _packed(arrays: list[np.ndarray]) -> np.ndarray:
+    """Return ``(N, 2)`` arrays one after the other in one array."""
+    return np.concatenate(arrays) if arrays else np.empty((0, 2))
+
+
+def _offsets(sizes: list[int]) -> np.ndarray:
+    """Return where each of consecutive runs of ``sizes`` starts, and the total."""
+    offsets = np.zeros(len(sizes) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum(sizes)
+    return offsets
+
+
+@numba.njit(cache=True)
+def _merge_all(
+    points: np.ndarray, offsets: np.ndarray, part_points: np.ndarray,
+    part_offsets: np.ndarray, first_parts: np.ndarray, alphas: np.ndarray, tolerance: float,
+    epsilon: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Merge each packed map polyline with its packed parts in turn (:func:`merge`).
+
+    Returns the merged vertices one polyline after the other, their offsets and which
+    polylines changed (an observation without vertices changes nothing).
+    """
+    count = offsets.size - 1
+    merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
+    merged_offsets = np.zeros(count + 1, np.int64)
+    changed = np.zeros(count, np.bool_)
+    stored = 0
+    for k in range(count):
+        line = points[offsets[k] : offsets[k + 1]].copy()
+        for part in range(first_parts[k], first_parts[k + 1]):
+            scan = part_points[part_offsets[part] : part_offsets[part + 1]].copy()
+            if scan.shape[0]:  # an empty scan polyline leaves the map polyline itself
+                line = _merge_vertices(line, scan, alphas[k], tolerance, epsilon)
+                changed[k] = True
+        if stored + line.shape[0] > merged.shape[0]:
+            grown = np.empty((2 * (stored + line.shape[0]), 2))
+            grown[:stored] = merged[:stored]
+            merged = grown
+        merged[stored : stored + line.shape[0]] = line
+        stored += line.shape[0]
+        merged_offsets[k + 1] = stored
+    return merged, merged_offsets, changed
 
 
 @numba.njit(cache=True)
