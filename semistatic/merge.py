@@ -48,7 +48,7 @@ from semistatic.association import box_gaps
 from semistatic.extraction import douglas_peucker_compiled
 from semistatic.fitting import MIN_CORNER_SINE
 from semistatic.hausdorff import restricted_hausdorff
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_offsets
 
 __all__ = [
     "END_TOLERANCE_FACTOR",
@@ -356,33 +356,18 @@ def _merged_parts(
     with np.errstate(divide="ignore"):
         alphas = np.where(np.isfinite(weights), 1.0 / (1.0 + weights), 0.0)
     parts = [[as_polyline(part).points for part in parts] for parts in observations]
-    # Packed: polyline k is points[offsets[k]:offsets[k + 1]], its parts the pieces
-    # part_offsets[first[k]:first[k + 1] + 1] of part_points.
-    sizes = [len(line) for line in lines]
-    part_sizes = [part.shape[0] for line_parts in parts for part in line_parts]
-    points = _packed([line.points for line in lines])
-    part_points = _packed([part for line_parts in parts for part in line_parts])
+    points, offsets = pack_vertices([line.points for line in lines])
+    part_points, part_offsets = pack_vertices([part for line_parts in parts for part in line_parts])
+    # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
+    first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
     merged, merged_offsets, changed = _merge_all(
-        points, _offsets(sizes), part_points, _offsets(part_sizes),
-        _offsets([len(line_parts) for line_parts in parts]), alphas, tolerance, epsilon,
+        points, offsets, part_points, part_offsets, first_parts, alphas, tolerance, epsilon
     )
     bounds = merged_offsets.tolist()
     return [
         _polyline(merged[bounds[k] : bounds[k + 1]]) if is_changed else line
         for k, (line, is_changed) in enumerate(zip(lines, changed.tolist(), strict=True))
     ]
-
-
-def _packed(arrays: list[np.ndarray]) -> np.ndarray:
-    """Return ``(N, 2)`` arrays one after the other in one array."""
-    return np.concatenate(arrays) if arrays else np.empty((0, 2))
-
-
-def _offsets(sizes: list[int]) -> np.ndarray:
-    """Return where each of consecutive runs of ``sizes`` starts, and the total."""
-    offsets = np.zeros(len(sizes) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum(sizes)
-    return offsets
 
 
 @numba.njit(cache=True)

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import untransform_points
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices
 from semistatic.types import Scan, beam_directions
 
 __all__ = [
@@ -222,9 +222,7 @@ def extend_all_ends(
     if not polylines:
         return []
     origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    offsets = np.zeros(len(polylines) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(line) for line in polylines])
-    points = np.concatenate([line.points for line in polylines])
+    points, offsets = pack_vertices([line.points for line in polylines])
     moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
     bounds = offsets.tolist()
     # Finite vertices moved by a finite shift: nothing to check.
@@ -365,12 +363,10 @@ def _beam_passes(
     Polylines of fewer than two vertices are cut nowhere; their counts come from
     :func:`expected_ranges` on every beam.
     """
+    if not lines:
+        return [], []
     scan = view.scan
-    offsets = np.zeros(len(lines) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(line) for line in lines])
-    points = (
-        np.concatenate([line.points for line in lines]) if offsets[-1] else np.empty((0, 2))
-    )
+    points, offsets = pack_vertices([line.points for line in lines])
     x, y, theta = np.asarray(view.pose, dtype=float).reshape(3).tolist()
     cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
     counts, piece_counts, pieces = _through_polylines(
