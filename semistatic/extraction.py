@@ -248,9 +248,56 @@ def _joined(
     # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a table,
     # and any longer step reads the table's last row, whose threshold joins nothing.
     sines, denominators = _breakpoint_sines(scan.angle_increment, lam)
-    step = np.minimum(np.diff(index), MAX_BRIDGED_GAP + 2)
-    threshold = scan.ranges[index[:-1]] * sines[step] / denominators[step] + 3.0 * sigma_r
-    return np.hypot(np.diff(x), np.diff(y)) <= threshold
+    return _joined_beams(scan.ranges, index, x, y, sines, denominators, sigma_r)
+
+
+@numba.njit(cache=True)
+def _joined_beams(
+    ranges: np.ndarray, index: np.ndarray, x: np.ndarray, y: np.ndarray, sines: np.ndarray,
+    denominators: np.ndarray, sigma_r: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return :func:`_joined` with the breakpoint table of :func:`_breakpoint_sines`."""
+    joined = np.empty(max(index.size - 1, 0), np.bool_)
+    for k in range(joined.size):
+        # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a
+        # table, and any longer step reads the table's last row, which joins nothing.
+        step = min(index[k + 1] - index[k], MAX_BRIDGED_GAP + 2)
+        threshold = ranges[index[k]] * sines[step] / denominators[step] + 3.0 * sigma_r
+        joined[k] = math.hypot(x[k + 1] - x[k], y[k + 1] - y[k]) <= threshold
+    return joined
+
+
+@numba.njit(cache=True)
+def _simplified_intervals(
+    ranges: np.ndarray, index: np.ndarray, cos: np.ndarray, sin: np.ndarray,
+    sines: np.ndarray, denominators: np.ndarray, sigma_r: float, min_points: int,
+    epsilon: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return the intervals of the usable beams ``index`` and their Douglas-Peucker vertices.
+
+    :func:`split_breakpoints` and :func:`douglas_peucker` on flat arrays: ``(P, 2)``
+    sensor-frame readings of every interval of at least ``min_points`` beams one after
+    the other, their beams, their interval numbers (``0, 1, ...``) and the positions of
+    the vertices Douglas-Peucker keeps.
+    """
+    x, y = ranges[index] * cos[index], ranges[index] * sin[index]
+    joined = _joined_beams(ranges, index, x, y, sines, denominators, sigma_r)
+    keep = np.zeros(index.size, np.bool_)
+    line_ids = np.empty(index.size, np.int64)
+    lines, start = 0, 0
+    for stop in range(1, index.size + 1):
+        if stop < index.size and joined[stop - 1]:
+            continue
+        if stop - start >= min_points:
+            keep[start:stop] = True
+            line_ids[start:stop] = lines
+            lines += 1
+        start = stop
+    points = np.empty((int(keep.sum()), 2))
+    points[:, 0], points[:, 1] = x[keep], y[keep]
+    line_ids = line_ids[keep]
+    ends = np.flatnonzero(line_ids[1:] != line_ids[:-1])
+    return points, index[keep], line_ids, _douglas_peucker_kept(points, ends, epsilon)
 
 
 @functools.lru_cache(maxsize=16)
@@ -269,21 +316,15 @@ def _breakpoint_sines(angle_increment: float, lam: float) -> tuple[np.ndarray, n
     return _frozen(sines), _frozen(denominators)
 
 
-def _douglas_peucker_lines(points: np.ndarray, line_ids: np.ndarray, epsilon: float) -> np.ndarray:
-    """Return the positions in ``points`` of the vertices Douglas-Peucker keeps, per line.
-
-    ``points[k]`` belongs to line ``line_ids[k]`` (non-decreasing, at least two points per
-    line); all lines in one compiled call.
-    """
-    ends = np.flatnonzero(np.diff(line_ids)).astype(np.int64)
-    return _douglas_peucker_kept(np.ascontiguousarray(points), ends, epsilon)
-
-
 @numba.njit(cache=True)
 def _douglas_peucker_kept(
     points: np.ndarray, ends: np.ndarray, epsilon: float
 ) -> np.ndarray:  # pragma: no cover - compiled
-    """Return the kept positions of lines ending at ``ends`` and at the last point."""
+    """Return the positions Douglas-Peucker keeps of lines ending at ``ends`` and at the end.
+
+    ``points`` hold the lines one after the other; line ``k`` ends at ``ends[k]`` (the last
+    one at the last point).
+    """
     keep = np.zeros(points.shape[0], dtype=np.bool_)
     if points.shape[0] == 0:
         return np.flatnonzero(keep)
@@ -456,17 +497,14 @@ def _extracted_vertices(
     nothing = (np.empty((0, 2)), np.empty(0, dtype=np.int64), [0])
     if index.size < params.min_points:
         return nothing
-    x, y = _end_points(scan, index)
-    joined = _joined(scan, index, x, y, params.breakpoint_lambda, params.breakpoint_sigma_r)
-    interval = np.concatenate(([0], np.cumsum(~joined)))
-    long_enough = np.bincount(interval) >= params.min_points
-    if not long_enough.any():
+    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    sines, denominators = _breakpoint_sines(scan.angle_increment, params.breakpoint_lambda)
+    points, beams, line_ids, kept = _simplified_intervals(
+        scan.ranges, index, cos, sin, sines, denominators, params.breakpoint_sigma_r,
+        params.min_points, params.epsilon,
+    )
+    if not points.shape[0]:
         return nothing
-    keep = long_enough[interval]
-    line_ids = (np.cumsum(long_enough) - 1)[interval[keep]]
-    beams = index[keep]
-    points = np.column_stack((x[keep], y[keep]))
-    kept = _douglas_peucker_lines(points, line_ids, params.epsilon)
     if params.vertex_placement == "fitted":
         vertices, kept, vertex_lines = fit_polylines(points, line_ids, kept, params.epsilon)
     else:
