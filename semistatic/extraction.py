@@ -282,22 +282,26 @@ def _simplified_intervals(
     """
     x, y = ranges[index] * cos[index], ranges[index] * sin[index]
     joined = _joined_beams(ranges, index, x, y, sines, denominators, sigma_r)
-    keep = np.zeros(index.size, np.bool_)
+    points = np.empty((index.size, 2))
+    beams = np.empty(index.size, np.int64)
     line_ids = np.empty(index.size, np.int64)
-    lines, start = 0, 0
+    ends = np.empty(index.size, np.int64)
+    lines, start, size = 0, 0, 0
     for stop in range(1, index.size + 1):
         if stop < index.size and joined[stop - 1]:
             continue
         if stop - start >= min_points:
-            keep[start:stop] = True
-            line_ids[start:stop] = lines
+            for k in range(start, stop):
+                points[size, 0], points[size, 1] = x[k], y[k]
+                beams[size], line_ids[size] = index[k], lines
+                size += 1
+            ends[lines] = size - 1
             lines += 1
         start = stop
-    points = np.empty((int(keep.sum()), 2))
-    points[:, 0], points[:, 1] = x[keep], y[keep]
-    line_ids = line_ids[keep]
-    ends = np.flatnonzero(line_ids[1:] != line_ids[:-1])
-    return points, index[keep], line_ids, _douglas_peucker_kept(points, ends, epsilon)
+    points = points[:size]
+    # Every interval but the last ends where the next begins.
+    kept = _douglas_peucker_kept(points, ends[: max(lines - 1, 0)], epsilon)
+    return points, beams[:size], line_ids[:size], kept
 
 
 @functools.lru_cache(maxsize=16)
@@ -328,9 +332,9 @@ def _douglas_peucker_kept(
     keep = np.zeros(points.shape[0], dtype=np.bool_)
     if points.shape[0] == 0:
         return np.flatnonzero(keep)
-    first = 0
+    first = np.int64(0)  # not a constant: a literal 0 would compile a kernel of its own
     for k in range(ends.size + 1):
-        last = ends[k] if k < ends.size else points.shape[0] - 1
+        last = ends[k] if k < ends.size else np.int64(points.shape[0] - 1)
         _keep_douglas_peucker(points, first, last, epsilon, keep)
         first = last + 1
     return np.flatnonzero(keep)

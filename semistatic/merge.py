@@ -210,14 +210,23 @@ def _extend_with_point(
     _, _, distance, before, after = _project(point.reshape(1, 2), vertices)
     if distance[0] > tolerance and (before[0] or after[0]):
         extended = np.empty((vertices.shape[0] + 1, 2))
-        if before[0]:
-            extended[0] = point
-            extended[1:] = vertices
-        else:
-            extended[:-1] = vertices
-            extended[-1] = point
+        at = 1 if before[0] else 0  # where the vertices go
+        _put_rows(vertices, 0, vertices.shape[0], extended, at)
+        _put_rows(point.reshape(1, 2), 0, 1, extended, 0 if before[0] else vertices.shape[0])
         return extended
     return vertices.copy()
+
+
+@numba.njit(cache=True)
+def _put_rows(
+    source: np.ndarray, start: int, stop: int, target: np.ndarray, at: int
+) -> None:  # pragma: no cover - compiled
+    """Copy rows ``start:stop`` of ``source`` to ``target`` from row ``at`` on.
+
+    (Loops rather than slice assignment, whose shape checks compile an error formatter.)
+    """
+    for k in range(stop - start):
+        target[at + k, 0], target[at + k, 1] = source[start + k, 0], source[start + k, 1]
 
 
 @numba.njit(cache=True)
@@ -395,9 +404,9 @@ def _merge_all(
                 changed[k] = True
         if stored + line.shape[0] > merged.shape[0]:
             grown = np.empty((2 * (stored + line.shape[0]), 2))
-            grown[:stored] = merged[:stored]
+            _put_rows(merged, 0, stored, grown, 0)
             merged = grown
-        merged[stored : stored + line.shape[0]] = line
+        _put_rows(line, 0, line.shape[0], merged, stored)
         stored += line.shape[0]
         merged_offsets[k + 1] = stored
     return merged, merged_offsets, changed
@@ -412,7 +421,10 @@ def _merge_vertices(
     if old.shape[0] == 0:
         return _simplified(new, epsilon)
     if old.shape[0] == 1 and new.shape[0] == 1:
-        return old + alpha * (new - old)
+        point = old.copy()
+        point[0, 0] += alpha * (new[0, 0] - old[0, 0])
+        point[0, 1] += alpha * (new[0, 1] - old[0, 1])
+        return point
     if old.shape[0] == 1:
         # A point has no extent to average: the scan's shape wins, the point may extend it.
         return _simplified(_extend_with_point(new, old[0], tolerance), epsilon)
@@ -439,16 +451,17 @@ def _cut_at(vertices: np.ndarray, arc: float, keep_head: bool) -> np.ndarray:  #
         length = _edge_length(vertices, k)
         if position + length >= arc:
             t = (arc - position) / length if length > 0.0 else 0.0
-            cut = vertices[k] + t * (vertices[k + 1] - vertices[k])
+            cut_x = vertices[k, 0] + t * (vertices[k + 1, 0] - vertices[k, 0])
+            cut_y = vertices[k, 1] + t * (vertices[k + 1, 1] - vertices[k, 1])
             if keep_head:
-                head = np.empty((k + 2, 2))
-                head[: k + 1] = vertices[: k + 1]
-                head[k + 1] = cut
-                return head
-            tail = np.empty((vertices.shape[0] - k, 2))
-            tail[0] = cut
-            tail[1:] = vertices[k + 1 :]
-            return tail
+                part = np.empty((k + 2, 2))
+                _put_rows(vertices, 0, k + 1, part, 0)
+                part[k + 1, 0], part[k + 1, 1] = cut_x, cut_y
+                return part
+            part = np.empty((vertices.shape[0] - k, 2))
+            part[0, 0], part[0, 1] = cut_x, cut_y
+            _put_rows(vertices, k + 1, vertices.shape[0], part, 1)
+            return part
         position += length
     return vertices.copy() if keep_head else vertices[-1:].copy()
 
@@ -504,27 +517,29 @@ def _contradicted(
                 first = k
     if first < 0:
         return nothing
-    tail = False
+    # (Flags as runtime values: a constant argument would compile a kernel per value.)
+    tail, head = False, False
     for k in range(last + 1, arcs.size):
-        if distances[k] > tolerance and not after[k] and _past_edge(
-            old, arcs[last], new[k], tolerance, True
-        ):
-            tail = True
+        forward = k > last
+        tail = distances[k] > tolerance and not after[k] and _past_edge(
+            old, arcs[last], new[k], tolerance, forward
+        )
+        if tail:
             break
-    head = False
     for k in range(first):
-        if distances[k] > tolerance and not before[k] and _past_edge(
-            old, arcs[first], new[k], tolerance, False
-        ):
-            head = True
+        forward = k > first
+        head = distances[k] > tolerance and not before[k] and _past_edge(
+            old, arcs[first], new[k], tolerance, forward
+        )
+        if head:
             break
     if not (tail or head):
         return nothing
     cut = old
     if tail:
-        cut = _cut_at(cut, arcs[last], True)
+        cut = _cut_at(cut, arcs[last], tail)
     if head:
-        cut = _cut_at(cut, arcs[first], False)
+        cut = _cut_at(cut, arcs[first], not head)
     cut = _distinct(cut)
     return cut if cut.shape[0] >= 2 else nothing
 
@@ -587,9 +602,12 @@ def _merged(
     moved = old.copy()
     for k in range(old.shape[0]):
         if not (scan_before[k] or scan_after[k]) and scan_distances[k] <= tolerance:
-            moved[k] = old[k] + alpha * (scan_feet[k] - old[k])
+            moved[k, 0] += alpha * (scan_feet[k, 0] - old[k, 0])
+            moved[k, 1] += alpha * (scan_feet[k, 1] - old[k, 1])
     # Scan vertices facing the map are inserted, pulled toward the map by its weight.
-    inserted = ~(before | after)
+    inserted = np.empty(new.shape[0], np.bool_)
+    for k in range(new.shape[0]):
+        inserted[k] = not (before[k] or after[k])
     count = new.shape[0]
     prepend, append = 0, 0
     map_arcs = _arc_starts(old)
@@ -599,21 +617,27 @@ def _merged(
     if reach > tolerance:
         prepend = _run_length(before)
     elif reach >= -tolerance:
-        moved[0] = old[0] + alpha * (new[0] - old[0])
+        moved[0, 0] = old[0, 0] + alpha * (new[0, 0] - old[0, 0])
+        moved[0, 1] = old[0, 1] + alpha * (new[0, 1] - old[0, 1])
         inserted[0] = False
     # End: the same, mirrored.
     reach = distances[-1] if after[-1] else arcs[-1] - map_arcs[-1]
     if reach > tolerance:
-        append = _run_length(after[::-1])
+        append = _run_length(after[::-1].copy())
     elif reach >= -tolerance:
-        moved[-1] = old[-1] + alpha * (new[-1] - old[-1])
+        moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
+        moved[-1, 1] = old[-1, 1] + alpha * (new[-1, 1] - old[-1, 1])
         inserted[-1] = False
 
     # Map vertices first on equal arc length, then scan vertices in scan order: listed in
     # that order, a stable sort by arc length keeps it.
-    total = old.shape[0] + int(inserted.sum())
+    total = old.shape[0]
+    for k in range(count):
+        total += inserted[k]
     keys, middle = np.empty(total), np.empty((total, 2))
-    keys[: old.shape[0]], middle[: old.shape[0]] = map_arcs, moved
+    for k in range(old.shape[0]):
+        keys[k] = map_arcs[k]
+    _put_rows(moved, 0, old.shape[0], middle, 0)
     row = old.shape[0]
     for k in range(count):
         if not inserted[k]:
@@ -632,18 +656,26 @@ def _merged(
         middle[row, 0] = anchor_x + alpha * (new[k, 0] - anchor_x)
         middle[row, 1] = anchor_y + alpha * (new[k, 1] - anchor_y)
         row += 1
-    middle = middle[np.argsort(keys, kind="mergesort")]
     candidates = np.empty((prepend + total + append, 2))
     size = 0
     for k in range(prepend):
         if distances[k] > tolerance:
-            candidates[size] = new[k]
+            _put_rows(new, k, k + 1, candidates, size)
             size += 1
-    candidates[size : size + total] = middle
+    # Insertion sort by arc length, stable (a handful of vertices).
+    for k in range(1, total):
+        key, x, y = keys[k], middle[k, 0], middle[k, 1]
+        at = k
+        while at > 0 and keys[at - 1] > key:
+            keys[at] = keys[at - 1]
+            middle[at, 0], middle[at, 1] = middle[at - 1, 0], middle[at - 1, 1]
+            at -= 1
+        keys[at], middle[at, 0], middle[at, 1] = key, x, y
+    _put_rows(middle, 0, total, candidates, size)
     size += total
     for k in range(count - append, count):
         if distances[k] > tolerance:
-            candidates[size] = new[k]
+            _put_rows(new, k, k + 1, candidates, size)
             size += 1
     keep = np.ones(size, np.bool_)
     for k in range(1, size):

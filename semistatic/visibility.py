@@ -465,7 +465,8 @@ def _through_polylines(
             if end > begin and end - begin >= gate:
                 if stored == pieces.shape[0]:
                     grown = np.empty((2 * stored, 2))
-                    grown[:stored] = pieces
+                    for row in range(stored):  # (a slice assignment compiles shape checks)
+                        grown[row, 0], grown[row, 1] = pieces[row, 0], pieces[row, 1]
                     pieces = grown
                 pieces[stored, 0], pieces[stored, 1] = begin, end
                 stored += 1
