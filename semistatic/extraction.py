@@ -1,6 +1,6 @@
 """Polyline extraction from one laser scan (paper Sec. 3.1, DESIGN.md details 1-3).
 
-The pipeline is a handful of vectorised numpy passes over the beams:
+The pipeline is a handful of passes over the beams (numpy, and numba where they fuse):
 
 1. :func:`remove_invalid` - drop ``nan``/``inf`` readings and those outside
    ``[range_min, min(range_max, max_range)]``; they never reach any statistic.
