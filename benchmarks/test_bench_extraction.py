@@ -17,8 +17,8 @@ import shapely
 from benchmarks.timing import median_us as timed_median_us
 from semistatic.evaluation import paper_params
 from semistatic.extraction import (
-    _douglas_peucker_kept,
     douglas_peucker,
+    douglas_peucker_compiled,
     extract_polylines,
     remove_invalid,
     remove_outliers,
@@ -59,7 +59,7 @@ def test_extraction_stages():
         "split_breakpoints": lambda: split_breakpoints(
             scan, kept, params.breakpoint_lambda, params.breakpoint_sigma_r, params.min_points
         ),
-        "douglas_peucker (all intervals)": lambda: _douglas_peucker_kept(
+        "douglas_peucker (all intervals)": lambda: douglas_peucker_compiled(
             points, np.flatnonzero(np.diff(line_ids)), params.epsilon
         ),
         "extract_polylines (total)": lambda: extract_polylines(scan, params),
@@ -98,7 +98,7 @@ def test_douglas_peucker_vs_shapely():
     stacked = scan.points()[np.concatenate(split)]
     line_ids = np.repeat(np.arange(len(split)), [interval.size for interval in split])
     ends = np.flatnonzero(np.diff(line_ids))
-    ours = median_us(lambda: _douglas_peucker_kept(stacked, ends, params.epsilon))
+    ours = median_us(lambda: douglas_peucker_compiled(stacked, ends, params.epsilon))
     theirs = median_us(
         lambda: shapely.get_coordinates(
             shapely.simplify(

@@ -300,7 +300,7 @@ def _simplified_intervals(
         start = stop
     points = points[:size]
     # Every interval but the last ends where the next begins.
-    kept = _douglas_peucker_kept(points, ends[: max(lines - 1, 0)], epsilon)
+    kept = douglas_peucker_compiled(points, ends[: max(lines - 1, 0)], epsilon)
     return points, beams[:size], line_ids[:size], kept
 
 
@@ -321,84 +321,67 @@ def _breakpoint_sines(angle_increment: float, lam: float) -> tuple[np.ndarray, n
 
 
 @numba.njit(cache=True)
-def _douglas_peucker_kept(
-    points: np.ndarray, ends: np.ndarray, epsilon: float
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Return the positions Douglas-Peucker keeps of lines ending at ``ends`` and at the end.
+def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: float) -> np.ndarray:
+    """Return the positions Douglas-Peucker keeps of lines, inside compiled kernels.
 
-    ``points`` hold the lines one after the other; line ``k`` ends at ``ends[k]`` (the last
-    one at the last point).
+    ``points`` hold finite vertices of lines one after the other; line ``k`` ends at
+    ``ends[k]`` (increasing int64; the last line at the last point). No checks: for
+    callers with a checked ``epsilon >= 0``. GEOS's recursion with GEOS's arithmetic
+    (``Distance::pointToSegment`` operation for operation) and rules (the first farthest
+    point on ties, kept only when strictly farther than ``epsilon``), so the same vertices
+    as ``shapely.simplify`` (:func:`douglas_peucker`).
+
+    Examples
+    --------
+    >>> points = np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0], [3.0, 1.0]])
+    >>> douglas_peucker_compiled(points, np.array([3]), 0.05)  # two lines, 0-3 and 4
+    array([0, 2, 3, 4])
     """
     keep = np.zeros(points.shape[0], dtype=np.bool_)
-    if points.shape[0] == 0:
-        return np.flatnonzero(keep)
+    sections = np.empty((max(points.shape[0], 1), 2), np.int64)
     first = np.int64(0)  # not a constant: a literal 0 would compile a kernel of its own
-    for k in range(ends.size + 1):
-        last = ends[k] if k < ends.size else np.int64(points.shape[0] - 1)
-        _keep_douglas_peucker(points, first, last, epsilon, keep)
+    for line in range(ends.size + 1 if points.shape[0] else 0):
+        last = ends[line] if line < ends.size else np.int64(points.shape[0] - 1)
+        keep[first] = keep[last] = True
+        sections[0, 0], sections[0, 1] = first, last
+        pending = 1
+        while pending:
+            pending -= 1
+            start, stop = sections[pending, 0], sections[pending, 1]
+            if start + 1 >= stop:
+                continue
+            ax, ay = points[start, 0], points[start, 1]
+            bx, by = points[stop, 0], points[stop, 1]
+            ex, ey = bx - ax, by - ay
+            length2 = ex * ex + ey * ey
+            point_segment = ax == bx and ay == by
+            length = math.sqrt(length2)
+            farthest, index = -1.0, start
+            for k in range(start + 1, stop):
+                px, py = points[k, 0], points[k, 1]
+                if point_segment:
+                    distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+                else:
+                    r = ((px - ax) * ex + (py - ay) * ey) / length2
+                    if r <= 0.0:
+                        distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+                    elif r >= 1.0:
+                        distance = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+                    else:
+                        distance = abs(((ay - py) * ex - (ax - px) * ey) / length2) * length
+                if distance > farthest:
+                    farthest, index = distance, k
+            if farthest > epsilon:
+                keep[index] = True
+                sections[pending, 0], sections[pending, 1] = index, stop
+                sections[pending + 1, 0], sections[pending + 1, 1] = start, index
+                pending += 2
         first = last + 1
     return np.flatnonzero(keep)
 
 
-@numba.njit(cache=True)
-def douglas_peucker_compiled(points: np.ndarray, epsilon: float) -> np.ndarray:
-    """Return :func:`douglas_peucker` of finite ``(N, 2)`` points inside compiled kernels.
-
-    No checks: for callers that hold finite vertices and a checked ``epsilon >= 0``.
-
-    Examples
-    --------
-    >>> douglas_peucker_compiled(np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0]]),
-    ...                          0.05)
-    array([0, 2, 3])
-    """
-    return _douglas_peucker_kept(points, np.empty(0, np.int64), epsilon)
-
-
-@numba.njit(cache=True)
-def _keep_douglas_peucker(
-    points: np.ndarray, first: int, last: int, epsilon: float, keep: np.ndarray
-) -> None:  # pragma: no cover - compiled
-    """Mark in ``keep`` the points ``first..last`` that Douglas-Peucker keeps.
-
-    GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
-    operation) and rules (the first farthest point on ties, kept only when strictly
-    farther than ``epsilon``), so the same vertices as ``shapely.simplify``.
-    """
-    keep[first] = keep[last] = True
-    sections = np.empty((max(last - first, 1), 2), np.int64)
-    sections[0, 0], sections[0, 1] = first, last
-    pending = 1
-    while pending:
-        pending -= 1
-        start, stop = sections[pending, 0], sections[pending, 1]
-        if start + 1 >= stop:
-            continue
-        ax, ay, bx, by = points[start, 0], points[start, 1], points[stop, 0], points[stop, 1]
-        ex, ey = bx - ax, by - ay
-        length2 = ex * ex + ey * ey
-        point_segment = ax == bx and ay == by
-        length = math.sqrt(length2)
-        farthest, index = -1.0, start
-        for k in range(start + 1, stop):
-            px, py = points[k, 0], points[k, 1]
-            if point_segment:
-                distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-            else:
-                r = ((px - ax) * ex + (py - ay) * ey) / length2
-                if r <= 0.0:
-                    distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-                elif r >= 1.0:
-                    distance = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
-                else:
-                    distance = abs(((ay - py) * ex - (ax - px) * ey) / length2) * length
-            if distance > farthest:
-                farthest, index = distance, k
-        if farthest > epsilon:
-            keep[index] = True
-            sections[pending, 0], sections[pending, 1] = index, stop
-            sections[pending + 1, 0], sections[pending + 1, 1] = start, index
-            pending += 2
+# One line: douglas_peucker_compiled without inner line ends.
+_NO_ENDS = np.empty(0, dtype=np.int64)
 
 
 def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
@@ -433,7 +416,7 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
         raise ValueError(f"douglas_peucker: epsilon must be >= 0 m, got {epsilon!r}")
     if not np.isfinite(points).all():
         raise ValueError("douglas_peucker: points must be finite; drop invalid readings first")
-    return douglas_peucker_compiled(points, float(epsilon))
+    return douglas_peucker_compiled(points, _NO_ENDS, float(epsilon))
 
 
 def extract_polylines(

@@ -197,12 +197,6 @@ def _polyline(points: np.ndarray) -> Polyline:
 
 
 @numba.njit(cache=True)
-def _simplified(vertices: np.ndarray, epsilon: float) -> np.ndarray:  # pragma: no cover
-    """Return ``vertices`` simplified with Douglas-Peucker (DESIGN.md detail 3)."""
-    return vertices[douglas_peucker_compiled(vertices, epsilon)]
-
-
-@numba.njit(cache=True)
 def _extend_with_point(
     vertices: np.ndarray, point: np.ndarray, tolerance: float
 ) -> np.ndarray:  # pragma: no cover - compiled
@@ -217,13 +211,14 @@ def _extend_with_point(
     return vertices.copy()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _put_rows(
     source: np.ndarray, start: int, stop: int, target: np.ndarray, at: int
 ) -> None:  # pragma: no cover - compiled
     """Copy rows ``start:stop`` of ``source`` to ``target`` from row ``at`` on.
 
-    (Loops rather than slice assignment, whose shape checks compile an error formatter.)
+    (Loops rather than slice assignment, whose shape checks compile an error formatter;
+    inlined, since constant arguments would compile one kernel per value.)
     """
     for k in range(stop - start):
         target[at + k, 0], target[at + k, 1] = source[start + k, 0], source[start + k, 1]
@@ -399,9 +394,26 @@ def _merge_all(
         line = points[offsets[k] : offsets[k + 1]].copy()
         for part in range(first_parts[k], first_parts[k + 1]):
             scan = part_points[part_offsets[part] : part_offsets[part + 1]].copy()
-            if scan.shape[0]:  # an empty scan polyline leaves the map polyline itself
-                line = _merge_vertices(line, scan, alphas[k], tolerance, epsilon)
-                changed[k] = True
+            if not scan.shape[0]:
+                continue  # an empty scan polyline leaves the map polyline itself
+            old, new = _distinct(line), _distinct(scan)
+            if old.shape[0] == 0:
+                line = new
+            elif old.shape[0] == 1 and new.shape[0] == 1:
+                line = old.copy()
+                line[0, 0] += alphas[k] * (new[0, 0] - old[0, 0])
+                line[0, 1] += alphas[k] * (new[0, 1] - old[0, 1])
+            elif old.shape[0] == 1:
+                # A point has no extent to average: the scan's shape wins, the point may
+                # extend it.
+                line = _extend_with_point(new, old[0], tolerance)
+            elif new.shape[0] == 1:
+                line = _extend_with_point(old, new[0], tolerance)
+            else:
+                line = _merged(old, new, alphas[k], tolerance, epsilon)
+            # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
+            line = line[douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)]
+            changed[k] = True
         if stored + line.shape[0] > merged.shape[0]:
             grown = np.empty((2 * (stored + line.shape[0]), 2))
             _put_rows(merged, 0, stored, grown, 0)
@@ -410,27 +422,6 @@ def _merge_all(
         stored += line.shape[0]
         merged_offsets[k + 1] = stored
     return merged, merged_offsets, changed
-
-
-@numba.njit(cache=True)
-def _merge_vertices(
-    original: np.ndarray, scan: np.ndarray, alpha: float, tolerance: float, epsilon: float
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Return the vertices of :func:`merge` (checked parameters, ``alpha`` its step)."""
-    old, new = _distinct(original), _distinct(scan)
-    if old.shape[0] == 0:
-        return _simplified(new, epsilon)
-    if old.shape[0] == 1 and new.shape[0] == 1:
-        point = old.copy()
-        point[0, 0] += alpha * (new[0, 0] - old[0, 0])
-        point[0, 1] += alpha * (new[0, 1] - old[0, 1])
-        return point
-    if old.shape[0] == 1:
-        # A point has no extent to average: the scan's shape wins, the point may extend it.
-        return _simplified(_extend_with_point(new, old[0], tolerance), epsilon)
-    if new.shape[0] == 1:
-        return _simplified(_extend_with_point(old, new[0], tolerance), epsilon)
-    return _simplified(_merged(old, new, alpha, tolerance, epsilon), epsilon)
 
 
 @numba.njit(cache=True)
