@@ -12,6 +12,10 @@ Two parts of the mapper reason about single beams rather than whole polylines:
   (an object moved along its own face: the map's ends agree with the scan, its middle
   does not).
 
+The beams are cast in compiled kernels (numba). The mapper checks all the map polylines
+of an update in one call (:func:`missed_and_cut`, :func:`missing_polylines`,
+:func:`extend_all_ends`); the single-polyline functions are the same call for one.
+
 Examples
 --------
 >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
