@@ -17,8 +17,8 @@ import shapely
 from benchmarks.timing import median_us as timed_median_us
 from semistatic.evaluation import paper_params
 from semistatic.extraction import (
-    _douglas_peucker_lines,
     douglas_peucker,
+    douglas_peucker_compiled,
     extract_polylines,
     remove_invalid,
     remove_outliers,
@@ -59,8 +59,8 @@ def test_extraction_stages():
         "split_breakpoints": lambda: split_breakpoints(
             scan, kept, params.breakpoint_lambda, params.breakpoint_sigma_r, params.min_points
         ),
-        "douglas_peucker (all intervals)": lambda: _douglas_peucker_lines(
-            points, line_ids, params.epsilon
+        "douglas_peucker (all intervals)": lambda: douglas_peucker_compiled(
+            points, np.flatnonzero(np.diff(line_ids)), params.epsilon
         ),
         "extract_polylines (total)": lambda: extract_polylines(scan, params),
     }
@@ -97,7 +97,8 @@ def test_douglas_peucker_vs_shapely():
     )
     stacked = scan.points()[np.concatenate(split)]
     line_ids = np.repeat(np.arange(len(split)), [interval.size for interval in split])
-    ours = median_us(lambda: _douglas_peucker_lines(stacked, line_ids, params.epsilon))
+    ends = np.flatnonzero(np.diff(line_ids))
+    ours = median_us(lambda: douglas_peucker_compiled(stacked, ends, params.epsilon))
     theirs = median_us(
         lambda: shapely.get_coordinates(
             shapely.simplify(

@@ -1,6 +1,6 @@
 """Polyline extraction from one laser scan (paper Sec. 3.1, DESIGN.md details 1-3).
 
-The pipeline is a handful of vectorised numpy passes over the beams:
+The pipeline is a handful of passes over the beams (numpy, and numba where they fuse):
 
 1. :func:`remove_invalid` - drop ``nan``/``inf`` readings and those outside
    ``[range_min, min(range_max, max_range)]``; they never reach any statistic.
@@ -10,8 +10,8 @@ The pipeline is a handful of vectorised numpy passes over the beams:
    breakpoints and at gaps of missing readings (DESIGN.md detail 2).
 4. :func:`douglas_peucker` - keep the vertices GEOS keeps (DESIGN.md detail 3).
 
-:func:`extract_polylines` chains them and simplifies every interval of a scan in one
-GEOS call.
+:func:`extract_polylines` chains them; one compiled Douglas-Peucker (GEOS's recursion and
+arithmetic) simplifies every interval of a scan, and the merge's polylines too.
 
 Examples
 --------
@@ -26,8 +26,8 @@ from __future__ import annotations
 import functools
 import math
 
+import numba
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.fitting import fit_polylines
@@ -39,7 +39,7 @@ from semistatic.types import Scan, beam_directions
 __all__ = [
     "MAX_BRIDGED_GAP",
     "douglas_peucker",
-    "douglas_peucker_rows",
+    "douglas_peucker_compiled",
     "extract_polylines",
     "remove_invalid",
     "remove_outliers",
@@ -58,11 +58,6 @@ FLAT_WINDOW_SIGMA = 1e-6
 # more missing beams in a row always break the polyline: something real is there
 # (an opening, glass, a far surface).
 MAX_BRIDGED_GAP = 1
-
-# Up to this many points one line is simplified with Python floats: a GEOS call costs
-# about 15 us in array conversions, the Python recursion about 0.3 us per point visited.
-PYTHON_DOUGLAS_PEUCKER = 16
-
 
 def remove_invalid(scan: Scan, max_range: float = math.inf) -> np.ndarray:
     """Return the boolean mask of usable beams of ``scan``.
@@ -253,9 +248,60 @@ def _joined(
     # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a table,
     # and any longer step reads the table's last row, whose threshold joins nothing.
     sines, denominators = _breakpoint_sines(scan.angle_increment, lam)
-    step = np.minimum(np.diff(index), MAX_BRIDGED_GAP + 2)
-    threshold = scan.ranges[index[:-1]] * sines[step] / denominators[step] + 3.0 * sigma_r
-    return np.hypot(np.diff(x), np.diff(y)) <= threshold
+    return _joined_beams(scan.ranges, index, x, y, sines, denominators, sigma_r)
+
+
+@numba.njit(cache=True)
+def _joined_beams(
+    ranges: np.ndarray, index: np.ndarray, x: np.ndarray, y: np.ndarray, sines: np.ndarray,
+    denominators: np.ndarray, sigma_r: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return :func:`_joined` with the breakpoint table of :func:`_breakpoint_sines`."""
+    joined = np.empty(max(index.size - 1, 0), np.bool_)
+    for k in range(joined.size):
+        # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a
+        # table, and any longer step reads the table's last row, which joins nothing.
+        step = min(index[k + 1] - index[k], MAX_BRIDGED_GAP + 2)
+        threshold = ranges[index[k]] * sines[step] / denominators[step] + 3.0 * sigma_r
+        joined[k] = math.hypot(x[k + 1] - x[k], y[k + 1] - y[k]) <= threshold
+    return joined
+
+
+@numba.njit(cache=True)
+def _simplified_intervals(
+    ranges: np.ndarray, index: np.ndarray, cos: np.ndarray, sin: np.ndarray,
+    sines: np.ndarray, denominators: np.ndarray, sigma_r: float, min_points: int,
+    epsilon: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return the intervals of the usable beams ``index`` and their Douglas-Peucker vertices.
+
+    :func:`split_breakpoints` and :func:`douglas_peucker` on flat arrays: ``(P, 2)``
+    sensor-frame readings of every interval of at least ``min_points`` beams one after
+    the other, their beams, their interval numbers (``0, 1, ...``) and the positions of
+    the vertices Douglas-Peucker keeps.
+    """
+    x, y = ranges[index] * cos[index], ranges[index] * sin[index]
+    joined = _joined_beams(ranges, index, x, y, sines, denominators, sigma_r)
+    points = np.empty((index.size, 2))
+    beams = np.empty(index.size, np.int64)
+    line_ids = np.empty(index.size, np.int64)
+    ends = np.empty(index.size, np.int64)
+    lines, start, size = 0, 0, 0
+    for stop in range(1, index.size + 1):
+        if stop < index.size and joined[stop - 1]:
+            continue
+        if stop - start >= min_points:
+            for k in range(start, stop):
+                points[size, 0], points[size, 1] = x[k], y[k]
+                beams[size], line_ids[size] = index[k], lines
+                size += 1
+            ends[lines] = size - 1
+            lines += 1
+        start = stop
+    points = points[:size]
+    # Every interval but the last ends where the next begins.
+    kept = douglas_peucker_compiled(points, ends[: max(lines - 1, 0)], epsilon)
+    return points, beams[:size], line_ids[:size], kept
 
 
 @functools.lru_cache(maxsize=16)
@@ -274,67 +320,68 @@ def _breakpoint_sines(angle_increment: float, lam: float) -> tuple[np.ndarray, n
     return _frozen(sines), _frozen(denominators)
 
 
-def _douglas_peucker_lines(points: np.ndarray, line_ids: np.ndarray, epsilon: float) -> np.ndarray:
-    """Return the positions in ``points`` of the vertices Douglas-Peucker keeps, per line.
+@numba.njit(cache=True)
+def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: float) -> np.ndarray:
+    """Return the positions Douglas-Peucker keeps of lines, inside compiled kernels.
 
-    ``points[k]`` belongs to line ``line_ids[k]`` (non-decreasing, at least two points per
-    line). GEOS simplifies all lines in one call. Its Douglas-Peucker measures XY
-    distances and copies the kept coordinates, Z included, so a Z holding each point's
-    position tells which points were kept: exactly GEOS's choice, at GEOS speed (about
-    ten times faster than the same algorithm level-by-level in numpy on a 541-beam scan).
-    """
-    xyz = np.column_stack((points, np.arange(points.shape[0], dtype=np.float64)))
-    lines = shapely.linestrings(xyz, indices=line_ids)
-    simplified = shapely.simplify(lines, epsilon, preserve_topology=False)
-    return shapely.get_coordinates(simplified, include_z=True)[:, 2].astype(np.int64)
-
-
-def douglas_peucker_rows(rows: list[list[float]], epsilon: float) -> list[int]:
-    """Return the indices :func:`douglas_peucker` keeps, with Python floats (>= 1 row).
-
-    GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
-    operation) and rules (the first farthest point on ties, kept only when strictly
-    farther than ``epsilon``): the same vertices, and for a few points faster than a GEOS
-    call. For callers that hold a few finite vertices as lists (a merge) and a checked
-    ``epsilon >= 0``; :func:`douglas_peucker` checks its input and picks the faster way.
+    ``points`` hold finite vertices of lines one after the other; line ``k`` ends at
+    ``ends[k]`` (increasing int64; the last line at the last point). No checks: for
+    callers with a checked ``epsilon >= 0``. GEOS's recursion with GEOS's arithmetic
+    (``Distance::pointToSegment`` operation for operation) and rules (the first farthest
+    point on ties, kept only when strictly farther than ``epsilon``), so the same vertices
+    as ``shapely.simplify`` (:func:`douglas_peucker`).
 
     Examples
     --------
-    >>> douglas_peucker_rows([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0]], 0.05)
-    [0, 2, 3]
+    >>> points = np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0], [3.0, 1.0]])
+    >>> douglas_peucker_compiled(points, np.array([3]), 0.05)  # two lines, 0-3 and 4
+    array([0, 2, 3, 4])
     """
-    keep = [True] * len(rows)
-    sections = [(0, len(rows) - 1)]
-    while sections:
-        first, last = sections.pop()
-        if first + 1 >= last:
-            continue
-        (ax, ay), (bx, by) = rows[first], rows[last]
-        ex, ey = bx - ax, by - ay
-        length2 = ex * ex + ey * ey
-        point_segment = ax == bx and ay == by
-        length = math.sqrt(length2)
-        farthest, index = -1.0, first
-        for k in range(first + 1, last):
-            px, py = rows[k]
-            if point_segment:
-                distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-            else:
-                r = ((px - ax) * ex + (py - ay) * ey) / length2
-                if r <= 0.0:
+    keep = np.zeros(points.shape[0], dtype=np.bool_)
+    sections = np.empty((max(points.shape[0], 1), 2), np.int64)
+    first = np.int64(0)  # not a constant: a literal 0 would compile a kernel of its own
+    for line in range(ends.size + 1 if points.shape[0] else 0):
+        last = ends[line] if line < ends.size else np.int64(points.shape[0] - 1)
+        keep[first] = keep[last] = True
+        sections[0, 0], sections[0, 1] = first, last
+        pending = 1
+        while pending:
+            pending -= 1
+            start, stop = sections[pending, 0], sections[pending, 1]
+            if start + 1 >= stop:
+                continue
+            ax, ay = points[start, 0], points[start, 1]
+            bx, by = points[stop, 0], points[stop, 1]
+            ex, ey = bx - ax, by - ay
+            length2 = ex * ex + ey * ey
+            point_segment = ax == bx and ay == by
+            length = math.sqrt(length2)
+            farthest, index = -1.0, start
+            for k in range(start + 1, stop):
+                px, py = points[k, 0], points[k, 1]
+                if point_segment:
                     distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
-                elif r >= 1.0:
-                    distance = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
                 else:
-                    distance = abs(((ay - py) * ex - (ax - px) * ey) / length2) * length
-            if distance > farthest:
-                farthest, index = distance, k
-        if farthest <= epsilon:
-            keep[first + 1 : last] = [False] * (last - first - 1)
-        else:
-            sections.append((index, last))
-            sections.append((first, index))
-    return [k for k, kept in enumerate(keep) if kept]
+                    r = ((px - ax) * ex + (py - ay) * ey) / length2
+                    if r <= 0.0:
+                        distance = math.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+                    elif r >= 1.0:
+                        distance = math.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+                    else:
+                        distance = abs(((ay - py) * ex - (ax - px) * ey) / length2) * length
+                if distance > farthest:
+                    farthest, index = distance, k
+            if farthest > epsilon:
+                keep[index] = True
+                sections[pending, 0], sections[pending, 1] = index, stop
+                sections[pending + 1, 0], sections[pending + 1, 1] = start, index
+                pending += 2
+        first = last + 1
+    return np.flatnonzero(keep)
+
+
+# One line: douglas_peucker_compiled without inner line ends.
+_NO_ENDS = np.empty(0, dtype=np.int64)
 
 
 def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
@@ -343,8 +390,8 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     Keeps the first and last point, and recursively the farthest point of a section when
     its point-to-*segment* distance is strictly greater than ``epsilon`` (the first one on
     ties): exactly the vertices of
-    ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``, which does
-    the work (DESIGN.md detail 3), repeated and collinear points included.
+    ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``
+    (DESIGN.md detail 3), repeated and collinear points included, by one compiled kernel.
 
     Parameters
     ----------
@@ -364,16 +411,12 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     >>> douglas_peucker([[0, 0], [1, 0.01], [2, 0], [2, 1]], epsilon=0.05)
     array([0, 2, 3])
     """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    points = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
     if not epsilon >= 0.0:
         raise ValueError(f"douglas_peucker: epsilon must be >= 0 m, got {epsilon!r}")
     if not np.isfinite(points).all():
         raise ValueError("douglas_peucker: points must be finite; drop invalid readings first")
-    if points.shape[0] <= 2:
-        return np.arange(points.shape[0], dtype=np.int64)
-    if points.shape[0] <= PYTHON_DOUGLAS_PEUCKER:
-        return np.array(douglas_peucker_rows(points.tolist(), float(epsilon)), dtype=np.int64)
-    return _douglas_peucker_lines(points, np.zeros(points.shape[0], np.int64), float(epsilon))
+    return douglas_peucker_compiled(points, _NO_ENDS, float(epsilon))
 
 
 def extract_polylines(
@@ -441,17 +484,14 @@ def _extracted_vertices(
     nothing = (np.empty((0, 2)), np.empty(0, dtype=np.int64), [0])
     if index.size < params.min_points:
         return nothing
-    x, y = _end_points(scan, index)
-    joined = _joined(scan, index, x, y, params.breakpoint_lambda, params.breakpoint_sigma_r)
-    interval = np.concatenate(([0], np.cumsum(~joined)))
-    long_enough = np.bincount(interval) >= params.min_points
-    if not long_enough.any():
+    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    sines, denominators = _breakpoint_sines(scan.angle_increment, params.breakpoint_lambda)
+    points, beams, line_ids, kept = _simplified_intervals(
+        scan.ranges, index, cos, sin, sines, denominators, params.breakpoint_sigma_r,
+        params.min_points, params.epsilon,
+    )
+    if not points.shape[0]:
         return nothing
-    keep = long_enough[interval]
-    line_ids = (np.cumsum(long_enough) - 1)[interval[keep]]
-    beams = index[keep]
-    points = np.column_stack((x[keep], y[keep]))
-    kept = _douglas_peucker_lines(points, line_ids, params.epsilon)
     if params.vertex_placement == "fitted":
         vertices, kept, vertex_lines = fit_polylines(points, line_ids, kept, params.epsilon)
     else:

@@ -56,11 +56,16 @@ from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
 from semistatic.extraction import extract_polylines
-from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observation
+from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observations
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan
-from semistatic.visibility import MAX_END_EXTENSION, extend_ends, free_space_cut, is_missing
+from semistatic.visibility import (
+    MAX_END_EXTENSION,
+    extend_all_ends,
+    missed_and_cut,
+    missing_polylines,
+)
 
 __all__ = [
     "MAX_MERGE_WEIGHT",
@@ -357,13 +362,21 @@ class PolylineMap:
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        observed = {
-            index: extend_ends(scan_lines[index], scan.angle_increment, viewpoint=pose)
-            for index in [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
-        }
+        indices = [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
+        observed = dict(zip(indices, extend_all_ends(
+            [scan_lines[index] for index in indices], scan.angle_increment, viewpoint=pose
+        ), strict=True))
         changed = self._merge_associated(observed, associated, stamp)
         seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
-        cut_away = self._cut_free_space(changed, scan, pose, seen) if params.free_space_cut else []
+        cut_away = []
+        if params.free_space_cut:
+            merged = sorted(changed)
+            checked = missed_and_cut(self._polylines_of(merged), scan, pose, params)
+            cut_away, pieces = self._cut(
+                {map_id: pieces for map_id, (_, pieces) in zip(merged, checked, strict=True)},
+                seen,
+            )
+            changed.update(pieces)  # new pieces may join others like any changed polyline
         changed.difference_update(cut_away)
         new_ids = self._insert_new(
             [observed[index] for index in unassociated if index in observed], stamp
@@ -385,14 +398,22 @@ class PolylineMap:
         clock.lap("join")
 
         missed, deleted = [], list(cut_away)
-        present = []
-        for map_id in unpaired_ids:
-            if map_id in absorbed or map_id in joined_survivors:
+        unpaired = [
+            map_id for map_id in unpaired_ids
+            if map_id not in absorbed and map_id not in joined_survivors
+        ]
+        polylines = self._polylines_of(unpaired)
+        if params.free_space_cut:
+            checked = missed_and_cut(polylines, scan, pose, params)
+        else:
+            missing = missing_polylines(polylines, scan, pose, params)
+            checked = [(flag, []) for flag in missing]
+        present = {}
+        for map_id, (missing, pieces) in zip(unpaired, checked, strict=True):
+            if not missing:
+                present[map_id] = pieces
                 continue
             entry = self._entries[map_id]
-            if not is_missing(entry.polyline, scan, pose, params):
-                present.append(map_id)
-                continue
             missed.append(map_id)
             if entry.misses + 1 >= params.miss_limit:
                 del self._entries[map_id]
@@ -401,7 +422,7 @@ class PolylineMap:
                 self._entries[map_id] = _replaced(entry, status="blank", misses=entry.misses + 1)
         if params.free_space_cut:
             # Not associated and not missing: still where it was, except perhaps in part.
-            deleted += self._cut_free_space(set(present), scan, pose, {})
+            deleted += self._cut(present, {})[0]
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
@@ -449,10 +470,9 @@ class PolylineMap:
         else:
             scan_lines = tuple(scan_polylines)
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
+        checked = missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
         missed = tuple(
-            map_id
-            for map_id in unpaired_ids
-            if is_missing(self._entries[map_id].polyline, scan, pose, self.params)
+            map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
         )
         return UpdateReport(scan.stamp, scan_lines, associated, unassociated, missed_ids=missed)
 
@@ -503,15 +523,16 @@ class PolylineMap:
         for pair in associated:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
         epsilon = self.params.epsilon
-        tolerance = END_TOLERANCE_FACTOR * epsilon
-        for map_id, scan_indices in by_map.items():
-            entry = self._entries[map_id]
-            line = entry.polyline
-            line = merge_observation(
-                line, [observed[index] for index in scan_indices], epsilon,
-                map_weight=float(min(entry.hits, MAX_MERGE_WEIGHT)), end_tolerance=tolerance,
-            )
-            self._entries[map_id] = _replaced(
+        entries = [self._entries[map_id] for map_id in by_map]
+        merged = merge_observations(
+            [entry.polyline for entry in entries],
+            [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
+            epsilon,
+            map_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
+            end_tolerance=END_TOLERANCE_FACTOR * epsilon,
+        )
+        for entry, line in zip(entries, merged, strict=True):
+            self._entries[entry.id] = _replaced(
                 entry,
                 polyline=line,
                 status="confirmed",
@@ -521,21 +542,25 @@ class PolylineMap:
             )
         return set(by_map)
 
-    def _cut_free_space(
-        self, ids: set[int], scan: Scan, pose: np.ndarray, seen: Mapping[int, Polyline]
-    ) -> list[int]:
-        """Cut the parts of polylines ``ids`` that ``scan`` reads through; return those gone.
+    def _polylines_of(self, ids: list[int]) -> list[Polyline]:
+        return [self._entries[map_id].polyline for map_id in ids]
 
-        The piece nearest to what the scan saw of it (``seen``, by map id) keeps the id and
+    def _cut(
+        self, cuts: Mapping[int, list[Polyline]], seen: Mapping[int, Polyline]
+    ) -> tuple[list[int], list[int]]:
+        """Replace polylines by the pieces a scan left of them; return the ids gone and new.
+
+        ``cuts`` are :func:`semistatic.visibility.free_space_cut`'s pieces by map id. The
+        piece nearest to what the scan saw of it (``seen``, by map id) keeps the id and
         state. The others are parts this scan did not confirm, and it contradicted the
         polyline they came from: new ids, counted as a miss (status ``"blank"``), so that
         what a moving thing leaves behind goes as a miss would. A polyline read through
         everywhere is deleted.
         """
-        gone = []
-        for map_id in sorted(ids):
+        gone, added = [], []
+        for map_id in sorted(cuts):
             entry = self._entries[map_id]
-            pieces = free_space_cut(entry.polyline, scan, pose, self.params)
+            pieces = cuts[map_id]
             if len(pieces) == 1 and pieces[0] is entry.polyline:
                 continue
             if not pieces:
@@ -559,9 +584,9 @@ class PolylineMap:
                 self._entries[self._next_id] = _replaced(
                     entry, id=self._next_id, polyline=piece, **other
                 )
-                ids.add(self._next_id)
+                added.append(self._next_id)
                 self._next_id += 1
-        return gone
+        return gone, added
 
     def _insert_new(self, new_lines: list[Polyline], stamp: float) -> list[int]:
         new_ids = []

@@ -36,25 +36,19 @@ array([[0.   , 0.005],
 
 from __future__ import annotations
 
-import bisect
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.association import box_gaps
-from semistatic.extraction import (
-    PYTHON_DOUGLAS_PEUCKER,
-    douglas_peucker,
-    douglas_peucker_rows,
-)
+from semistatic.extraction import douglas_peucker_compiled
 from semistatic.fitting import MIN_CORNER_SINE
 from semistatic.hausdorff import restricted_hausdorff
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_offsets
 
 __all__ = [
     "END_TOLERANCE_FACTOR",
@@ -62,6 +56,7 @@ __all__ = [
     "join",
     "merge",
     "merge_observation",
+    "merge_observations",
     "overlaps",
     "project_onto",
 ]
@@ -74,10 +69,6 @@ END_TOLERANCE_FACTOR = 3.0
 # Consecutive vertices closer than this (m) are one vertex (zero-length edges have no
 # direction to project onto).
 DUPLICATE_DISTANCE = 1e-9
-
-# Up to this many point-segment pairs, projecting with Python floats beats numpy, whose
-# per-call overhead dominates on the handful of vertices of a merge.
-SMALL_PROJECTION = 64
 
 # Two polylines' extents overlap when the projections of one onto the other span more
 # than this (m): end-to-end pieces that merely touch (a box's two faces at their corner)
@@ -108,125 +99,67 @@ class Projection:
     """``(K,)`` true where the nearest point is the end vertex."""
 
 
-def _distinct(points: np.ndarray) -> np.ndarray:
-    """Return ``points`` without consecutive repeats."""
-    if points.shape[0] < 2:
-        return points
-    if points.shape[0] * (points.shape[0] - 1) <= SMALL_PROJECTION:
-        rows = points.tolist()
-        kept = [0] + [
-            k
-            for k in range(1, len(rows))
-            if (rows[k][0] - rows[k - 1][0]) ** 2 + (rows[k][1] - rows[k - 1][1]) ** 2
-            > DUPLICATE_DISTANCE**2
-        ]
-        return points if len(kept) == len(rows) else points[kept]
-    steps = points[1:] - points[:-1]
-    repeated = np.einsum("ij,ij->i", steps, steps) <= DUPLICATE_DISTANCE**2
-    if not repeated.any():
-        return points
-    return points[np.concatenate(([True], ~repeated))]
+@numba.njit(cache=True)
+def _distinct(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Return a copy of ``(N, 2)`` ``points`` without consecutive repeats.
+
+    Each vertex is compared with the one before it in the input.
+    """
+    keep = np.ones(points.shape[0], dtype=np.bool_)
+    for k in range(1, points.shape[0]):
+        dx, dy = points[k, 0] - points[k - 1, 0], points[k, 1] - points[k - 1, 1]
+        keep[k] = dx * dx + dy * dy > DUPLICATE_DISTANCE**2
+    return points[keep]
 
 
-def _distinct_rows(rows: list[list[float]]) -> list[list[float]]:
-    """Return vertex ``rows`` without consecutive repeats (Python floats)."""
-    if len(rows) < 2:
-        return rows
-    # As _distinct: each vertex is compared with the one before it in the input.
-    return [rows[0]] + [
-        row
-        for previous, row in itertools.pairwise(rows)
-        if (row[0] - previous[0]) ** 2 + (row[1] - previous[1]) ** 2 > DUPLICATE_DISTANCE**2
-    ]
+@numba.njit(cache=True)
+def _project(
+    points: np.ndarray, vertices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """Project ``(K, 2)`` points onto distinct ``(N >= 2, 2)`` vertices (no checks).
 
-
-# Projections inside merge travel as plain lists: (arc, foot, distance, before, after).
-_Found = tuple[list[float], list[list[float]], list[float], list[bool], list[bool]]
-
-
-def _project(points: np.ndarray, vertices: np.ndarray) -> Projection:
-    """Project ``(K, 2)`` points onto distinct ``(N >= 2, 2)`` vertices (no checks)."""
-    if points.shape[0] * (vertices.shape[0] - 1) <= SMALL_PROJECTION:
-        arc, foot, distance, before, after = _project_lists(points.tolist(), vertices.tolist())
-        return Projection(
-            arc=np.array(arc),
-            foot=np.array(foot).reshape(-1, 2),
-            distance=np.array(distance),
-            before=np.array(before, dtype=bool),
-            after=np.array(after, dtype=bool),
-        )
-    return _project_vectorised(points, vertices)
-
-
-def _found(points: list[list[float]], vertices: list[list[float]]) -> _Found:
-    """Return :func:`_project` as lists, computed the cheaper way for the size."""
-    if len(points) * (len(vertices) - 1) <= SMALL_PROJECTION:
-        return _project_lists(points, vertices)
-    found = _project_vectorised(np.array(points), np.array(vertices))
-    return (
-        found.arc.tolist(),
-        found.foot.tolist(),
-        found.distance.tolist(),
-        found.before.tolist(),
-        found.after.tolist(),
-    )
-
-
-def _project_lists(points: list[list[float]], vertices: list[list[float]]) -> _Found:
-    """Return :func:`_project` with plain Python floats (fast for a few pairs)."""
-    segments = []
-    arc = 0.0
-    for (ax, ay), (bx, by) in itertools.pairwise(vertices):
-        ex, ey = bx - ax, by - ay
-        squared = ex * ex + ey * ey
-        length = math.sqrt(squared)
-        segments.append((ax, ay, ex, ey, squared, length, arc))
-        arc += length
-    last = len(segments) - 1
-    arcs, feet, distances, before, after = [], [], [], [], []
-    for px, py in points:
-        best = (math.inf, 0, 0.0, 0.0)
-        for index, (ax, ay, ex, ey, squared, _, _) in enumerate(segments):
-            raw = ((px - ax) * ex + (py - ay) * ey) / squared
+    Returns the fields of :class:`Projection`: arc, foot, distance, before, after.
+    """
+    count = points.shape[0]
+    last = vertices.shape[0] - 2
+    starts = np.empty(last + 2)
+    starts[0] = 0.0
+    for edge in range(last + 1):
+        starts[edge + 1] = starts[edge] + math.sqrt(_squared_edge(vertices, edge))
+    arc, foot, distance = np.empty(count), np.empty((count, 2)), np.empty(count)
+    before, after = np.zeros(count, np.bool_), np.zeros(count, np.bool_)
+    for k in range(count):
+        px, py = points[k, 0], points[k, 1]
+        best, index, best_t, best_raw = math.inf, 0, 0.0, 0.0
+        for edge in range(last + 1):
+            ax, ay = vertices[edge, 0], vertices[edge, 1]
+            ex, ey = vertices[edge + 1, 0] - ax, vertices[edge + 1, 1] - ay
+            raw = ((px - ax) * ex + (py - ay) * ey) / (ex * ex + ey * ey)
             t = 0.0 if raw < 0.0 else 1.0 if raw > 1.0 else raw
             gx, gy = px - ax - t * ex, py - ay - t * ey
             squared_distance = gx * gx + gy * gy
-            if squared_distance < best[0]:  # strict: the lowest segment wins ties
-                best = (squared_distance, index, t, raw)
-        squared_distance, index, t, raw = best
-        ax, ay, ex, ey, _, length, start = segments[index]
-        arcs.append(start + t * length)
-        feet.append([ax + t * ex, ay + t * ey])
-        distances.append(math.sqrt(squared_distance))
-        before.append(index == 0 and raw <= 0.0)
-        after.append(index == last and raw >= 1.0)
-    return arcs, feet, distances, before, after
+            if squared_distance < best:  # strict: the lowest segment wins ties
+                best, index, best_t, best_raw = squared_distance, edge, t, raw
+        ax, ay = vertices[index, 0], vertices[index, 1]
+        ex, ey = vertices[index + 1, 0] - ax, vertices[index + 1, 1] - ay
+        arc[k] = starts[index] + best_t * math.sqrt(ex * ex + ey * ey)
+        foot[k, 0], foot[k, 1] = ax + best_t * ex, ay + best_t * ey
+        distance[k] = math.sqrt(best)
+        before[k] = index == 0 and best_raw <= 0.0
+        after[k] = index == last and best_raw >= 1.0
+    return arc, foot, distance, before, after
 
 
-def _project_vectorised(points: np.ndarray, vertices: np.ndarray) -> Projection:
-    """Return :func:`_project` with numpy (for many point-segment pairs)."""
-    starts = vertices[:-1]
-    edges = vertices[1:] - starts
-    edge_x, edge_y = edges[:, 0], edges[:, 1]
-    squared = edge_x * edge_x + edge_y * edge_y
-    lengths = np.sqrt(squared)
-    rel_x = points[:, 0, None] - starts[:, 0]
-    rel_y = points[:, 1, None] - starts[:, 1]
-    raw = (rel_x * edge_x + rel_y * edge_y) / squared
-    t = np.minimum(np.maximum(raw, 0.0), 1.0)
-    gap_x, gap_y = rel_x - t * edge_x, rel_y - t * edge_y
-    squared_distances = gap_x * gap_x + gap_y * gap_y
-    nearest = squared_distances.argmin(axis=1)
-    rows = np.arange(points.shape[0])
-    t_near, raw_near = t[rows, nearest], raw[rows, nearest]
-    arcs = np.concatenate(([0.0], np.add.accumulate(lengths)))
-    return Projection(
-        arc=arcs[nearest] + t_near * lengths[nearest],
-        foot=starts[nearest] + t_near[:, None] * edges[nearest],
-        distance=np.sqrt(squared_distances[rows, nearest]),
-        before=(nearest == 0) & (raw_near <= 0.0),
-        after=(nearest == edges.shape[0] - 1) & (raw_near >= 1.0),
-    )
+@numba.njit(cache=True)
+def _squared_edge(vertices: np.ndarray, edge: int) -> float:  # pragma: no cover - compiled
+    ex, ey = vertices[edge + 1, 0] - vertices[edge, 0], vertices[edge + 1, 1] - vertices[edge, 1]
+    return ex * ex + ey * ey
+
+
+@numba.njit(cache=True)
+def _edge_length(vertices: np.ndarray, edge: int) -> float:  # pragma: no cover - compiled
+    return math.hypot(vertices[edge + 1, 0] - vertices[edge, 0],
+                      vertices[edge + 1, 1] - vertices[edge, 1])
 
 
 def project_onto(points: ArrayLike, polyline: Polyline | ArrayLike) -> Projection:
@@ -241,68 +174,61 @@ def project_onto(points: ArrayLike, polyline: Polyline | ArrayLike) -> Projectio
     >>> found.arc, found.distance, found.before
     (array([1., 0.]), array([0.5, 1. ]), array([False,  True]))
     """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    points = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
     vertices = _distinct(as_polyline(polyline).points)
     if vertices.shape[0] < 2:
         raise ValueError(
             "project_onto: the polyline needs at least two distinct vertices, "
             f"got {vertices.shape[0]}"
         )
-    return _project(points, vertices)
+    return Projection(*_project(points, vertices))
 
 
 # The scan indices 0..N-1 of merged polylines, one read-only array per N.
 _VERTEX_ORDER: dict[int, np.ndarray] = {}
 
 
-def _polyline(rows: list[list[float]]) -> Polyline:
-    """Wrap finite vertex rows computed here as a polyline (scan indices: vertex order)."""
-    points = np.array(rows, dtype=np.float64).reshape(-1, 2)
+def _polyline(points: np.ndarray) -> Polyline:
+    """Wrap fresh finite vertices computed here as a polyline (scan indices: vertex order)."""
     indices = _VERTEX_ORDER.get(points.shape[0])
     if indices is None:  # frozen by _trusted, so shared by every polyline of that size
         indices = _VERTEX_ORDER[points.shape[0]] = np.arange(points.shape[0], dtype=np.int64)
     return Polyline._trusted(points, indices)
 
 
-def _simplified(rows: list[list[float]], epsilon: float) -> Polyline:
-    """Return vertex ``rows`` simplified with Douglas-Peucker as a new polyline.
-
-    Both ways keep exactly the vertices ``douglas_peucker`` keeps (DESIGN.md detail 3):
-    a merge has a handful of vertices, for which the Python twin of GEOS's recursion is
-    cheapest; GEOS is called directly for more (the vectorised many-section version is
-    tuned for whole scans).
-    """
-    if len(rows) <= 2:
-        return _polyline(rows)
-    if len(rows) <= PYTHON_DOUGLAS_PEUCKER:
-        return _polyline([rows[k] for k in douglas_peucker_rows(rows, epsilon)])
-    points = np.array(rows, dtype=np.float64)
-    line = shapely.simplify(shapely.linestrings(points), epsilon, preserve_topology=False)
-    kept = shapely.get_coordinates(line)
-    if kept.shape[0] < 2:  # GEOS gave up on a degenerate line: do it ourselves
-        kept = points[douglas_peucker(points, epsilon)]
-    return _polyline(kept.tolist())
-
-
+@numba.njit(cache=True)
 def _extend_with_point(
-    vertices: list[list[float]], point: list[float], tolerance: float
-) -> list[list[float]]:
+    vertices: np.ndarray, point: np.ndarray, tolerance: float
+) -> np.ndarray:  # pragma: no cover - compiled
     """Return ``vertices`` extended by ``point`` when it lies beyond an end by > tolerance."""
-    _, _, distance, before, after = _found([point], vertices)
-    if distance[0] > tolerance:
-        if before[0]:
-            return [point, *vertices]
-        if after[0]:
-            return [*vertices, point]
-    return vertices
+    _, _, distance, before, after = _project(point.reshape(1, 2), vertices)
+    if distance[0] > tolerance and (before[0] or after[0]):
+        extended = np.empty((vertices.shape[0] + 1, 2))
+        at = 1 if before[0] else 0  # where the vertices go
+        _put_rows(vertices, 0, vertices.shape[0], extended, at)
+        _put_rows(point.reshape(1, 2), 0, 1, extended, 0 if before[0] else vertices.shape[0])
+        return extended
+    return vertices.copy()
 
 
-def _run_length(flags: list[bool]) -> int:
+@numba.njit(cache=True, inline="always")
+def _put_rows(
+    source: np.ndarray, start: int, stop: int, target: np.ndarray, at: int
+) -> None:  # pragma: no cover - compiled
+    """Copy rows ``start:stop`` of ``source`` to ``target`` from row ``at`` on.
+
+    (Loops rather than slice assignment, whose shape checks compile an error formatter;
+    inlined, since constant arguments would compile one kernel per value.)
+    """
+    for k in range(stop - start):
+        target[at + k, 0], target[at + k, 1] = source[start + k, 0], source[start + k, 1]
+
+
+@numba.njit(cache=True)
+def _run_length(flags: np.ndarray) -> int:  # pragma: no cover - compiled
     """Return the length of the leading run of true values."""
     count = 0
-    for flag in flags:
-        if not flag:
-            break
+    while count < flags.size and flags[count]:
         count += 1
     return count
 
@@ -352,8 +278,8 @@ def merge(
     >>> len(merge(box, [[0.4, 0.01], [0.6, -0.01]], epsilon=0.03))  # a partial view
     3
     """
-    return _merged_parts("merge", map_polyline, [scan_polyline], epsilon, map_weight,
-                         end_tolerance)
+    return _merged_parts("merge", [map_polyline], [[scan_polyline]], epsilon, [map_weight],
+                         end_tolerance)[0]
 
 
 def merge_observation(
@@ -378,76 +304,163 @@ def merge_observation(
     array([[0.  , 0.01],
            [4.  , 0.01]])
     """
-    return _merged_parts("merge_observation", map_polyline, parts, epsilon, map_weight,
-                         end_tolerance)
+    return _merged_parts("merge_observation", [map_polyline], [parts], epsilon, [map_weight],
+                         end_tolerance)[0]
+
+
+def merge_observations(
+    map_polylines: Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
+    epsilon: float,
+    *,
+    map_weights: Sequence[float],
+    end_tolerance: float | None = None,
+) -> list[Polyline]:
+    """Return :func:`merge_observation` of many map polylines, in one compiled call.
+
+    ``observations[k]`` are the scan polylines one scan associated with
+    ``map_polylines[k]``, which stands for ``map_weights[k]`` observations. A map
+    polyline whose observation has no vertices is returned as itself.
+
+    Examples
+    --------
+    >>> walls = [[[0.0, 0.0], [2.0, 0.0]], [[0.0, 1.0], [2.0, 1.0]]]
+    >>> seen = [[[[0.0, 0.02], [2.0, 0.02]]], [[[0.0, 1.02], [3.0, 1.02]]]]
+    >>> [line.points.round(3).tolist()
+    ...  for line in merge_observations(walls, seen, 0.03, map_weights=[1.0, 3.0])]
+    [[[0.0, 0.01], [2.0, 0.01]], [[0.0, 1.005], [3.0, 1.02]]]
+    """
+    return _merged_parts("merge_observations", map_polylines, observations, epsilon,
+                         map_weights, end_tolerance)
 
 
 def _merged_parts(
     caller: str,
-    map_polyline: Polyline | ArrayLike,
-    parts: Sequence[Polyline | ArrayLike],
+    map_polylines: Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
     epsilon: float,
-    map_weight: float,
+    map_weights: Sequence[float],
     end_tolerance: float | None,
-) -> Polyline:
-    """Return :func:`merge_observation` with its parameters checked once for ``caller``."""
+) -> list[Polyline]:
+    """Return :func:`merge_observations` with its parameters checked once for ``caller``."""
     if not epsilon > 0.0:
         raise ValueError(f"{caller}: epsilon must be > 0 m, got {epsilon!r}")
-    if not map_weight >= 0.0:
-        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weight!r}")
+    weights = np.asarray(map_weights, dtype=float).reshape(-1)
+    if not (weights >= 0.0).all():
+        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights!r}")
     tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
     if not tolerance >= 0.0:
         raise ValueError(f"{caller}: end_tolerance must be >= 0 m, got {end_tolerance!r}")
-    line = as_polyline(map_polyline)
-    for part in parts:
-        line = _merge_rows(line, as_polyline(part).points.tolist(), epsilon, map_weight,
-                           tolerance)
-    return line
+    lines = [as_polyline(line) for line in map_polylines]
+    if not (len(lines) == len(observations) == weights.size):
+        raise ValueError(
+            f"{caller}: need one observation and one weight per map polyline, got "
+            f"{len(lines)} polylines, {len(observations)} observations, {weights.size} weights"
+        )
+    with np.errstate(divide="ignore"):
+        alphas = np.where(np.isfinite(weights), 1.0 / (1.0 + weights), 0.0)
+    parts = [[as_polyline(part).points for part in parts] for parts in observations]
+    points, offsets = pack_vertices([line.points for line in lines])
+    part_points, part_offsets = pack_vertices([part for line_parts in parts for part in line_parts])
+    # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
+    first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
+    merged, merged_offsets, changed = _merge_all(
+        points, offsets, part_points, part_offsets, first_parts, alphas, tolerance, epsilon
+    )
+    bounds = merged_offsets.tolist()
+    return [
+        _polyline(merged[bounds[k] : bounds[k + 1]]) if is_changed else line
+        for k, (line, is_changed) in enumerate(zip(lines, changed.tolist(), strict=True))
+    ]
 
 
-def _merge_rows(
-    original: Polyline,
-    scan_rows: list[list[float]],
+@numba.njit(cache=True)
+def _merge_all(
+    points: np.ndarray, offsets: np.ndarray, part_points: np.ndarray,
+    part_offsets: np.ndarray, first_parts: np.ndarray, alphas: np.ndarray, tolerance: float,
     epsilon: float,
-    map_weight: float,
-    tolerance: float,
-) -> Polyline:
-    """Return :func:`merge` of scan vertices given as rows, with checked parameters."""
-    old = _distinct_rows(original.points.tolist())
-    new = _distinct_rows(scan_rows)
-    alpha = 1.0 / (1.0 + map_weight) if math.isfinite(map_weight) else 0.0
-    if not new:
-        return original
-    if not old:
-        return _simplified(new, epsilon)
-    if len(old) == 1 and len(new) == 1:
-        (x0, y0), (x1, y1) = old[0], new[0]
-        return _polyline([[x0 + alpha * (x1 - x0), y0 + alpha * (y1 - y0)]])
-    if len(old) == 1:
-        # A point has no extent to average: the scan's shape wins, the point may extend it.
-        return _simplified(_extend_with_point(new, old[0], tolerance), epsilon)
-    if len(new) == 1:
-        return _simplified(_extend_with_point(old, new[0], tolerance), epsilon)
-    return _simplified(_merged(old, new, alpha, tolerance, epsilon), epsilon)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Merge each packed map polyline with its packed parts in turn (:func:`merge`).
+
+    Returns the merged vertices one polyline after the other, their offsets and which
+    polylines changed (an observation without vertices changes nothing).
+    """
+    count = offsets.size - 1
+    merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
+    merged_offsets = np.zeros(count + 1, np.int64)
+    changed = np.zeros(count, np.bool_)
+    stored = 0
+    for k in range(count):
+        line = points[offsets[k] : offsets[k + 1]].copy()
+        for part in range(first_parts[k], first_parts[k + 1]):
+            scan = part_points[part_offsets[part] : part_offsets[part + 1]].copy()
+            if not scan.shape[0]:
+                continue  # an empty scan polyline leaves the map polyline itself
+            old, new = _distinct(line), _distinct(scan)
+            if old.shape[0] == 0:
+                line = new
+            elif old.shape[0] == 1 and new.shape[0] == 1:
+                line = old.copy()
+                line[0, 0] += alphas[k] * (new[0, 0] - old[0, 0])
+                line[0, 1] += alphas[k] * (new[0, 1] - old[0, 1])
+            elif old.shape[0] == 1:
+                # A point has no extent to average: the scan's shape wins, the point may
+                # extend it.
+                line = _extend_with_point(new, old[0], tolerance)
+            elif new.shape[0] == 1:
+                line = _extend_with_point(old, new[0], tolerance)
+            else:
+                line = _merged(old, new, alphas[k], tolerance, epsilon)
+            # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
+            line = line[douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)]
+            changed[k] = True
+        if stored + line.shape[0] > merged.shape[0]:
+            grown = np.empty((2 * (stored + line.shape[0]), 2))
+            _put_rows(merged, 0, stored, grown, 0)
+            merged = grown
+        _put_rows(line, 0, line.shape[0], merged, stored)
+        stored += line.shape[0]
+        merged_offsets[k + 1] = stored
+    return merged, merged_offsets, changed
 
 
-def _cut_at(vertices: list[list[float]], arc: float, keep_head: bool) -> list[list[float]]:
+@numba.njit(cache=True)
+def _arc_starts(vertices: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the arc-length position of each vertex, summed edge by edge."""
+    arcs = np.empty(vertices.shape[0])
+    arcs[0] = 0.0
+    for k in range(1, vertices.shape[0]):
+        arcs[k] = arcs[k - 1] + _edge_length(vertices, k - 1)
+    return arcs
+
+
+@numba.njit(cache=True)
+def _cut_at(vertices: np.ndarray, arc: float, keep_head: bool) -> np.ndarray:  # pragma: no cover
     """Return the part of a polyline before (``keep_head``) or after arc length ``arc``."""
     position = 0.0
-    for k, (start, end) in enumerate(itertools.pairwise(vertices)):
-        length = math.dist(start, end)
+    for k in range(vertices.shape[0] - 1):
+        length = _edge_length(vertices, k)
         if position + length >= arc:
             t = (arc - position) / length if length > 0.0 else 0.0
-            cut = [start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1])]
-            return [*vertices[: k + 1], cut] if keep_head else [cut, *vertices[k + 1 :]]
+            cut_x = vertices[k, 0] + t * (vertices[k + 1, 0] - vertices[k, 0])
+            cut_y = vertices[k, 1] + t * (vertices[k + 1, 1] - vertices[k, 1])
+            if keep_head:
+                part = np.empty((k + 2, 2))
+                _put_rows(vertices, 0, k + 1, part, 0)
+                part[k + 1, 0], part[k + 1, 1] = cut_x, cut_y
+                return part
+            part = np.empty((vertices.shape[0] - k, 2))
+            part[0, 0], part[0, 1] = cut_x, cut_y
+            _put_rows(vertices, k + 1, vertices.shape[0], part, 1)
+            return part
         position += length
-    return list(vertices) if keep_head else [vertices[-1]]
+    return vertices.copy() if keep_head else vertices[-1:].copy()
 
 
+@numba.njit(cache=True)
 def _past_edge(
-    vertices: list[list[float]], arc: float, point: list[float], tolerance: float,
-    forward: bool,
-) -> bool:
+    vertices: np.ndarray, arc: float, point: np.ndarray, tolerance: float, forward: bool
+) -> bool:  # pragma: no cover - compiled
     """Return whether ``point`` continues the map edge at arc length ``arc`` past its end.
 
     True when ``point`` projects on that edge's line more than ``tolerance`` beyond the
@@ -455,65 +468,78 @@ def _past_edge(
     where the map turns. A point beside the edge (a noisy end) does not count.
     """
     position = 0.0
-    edges = list(itertools.pairwise(vertices))
-    for number, (start, end) in enumerate(edges):
-        length = math.dist(start, end)
-        if position + length < arc and number < len(edges) - 1:
+    edges = vertices.shape[0] - 1
+    for number in range(edges):
+        length = _edge_length(vertices, number)
+        if position + length < arc and number < edges - 1:
             position += length
             continue
         if length == 0.0:
             return False
-        ux, uy = (end[0] - start[0]) / length, (end[1] - start[1]) / length
-        along = (point[0] - start[0]) * ux + (point[1] - start[1]) * uy
+        ux = (vertices[number + 1, 0] - vertices[number, 0]) / length
+        uy = (vertices[number + 1, 1] - vertices[number, 1]) / length
+        along = (point[0] - vertices[number, 0]) * ux + (point[1] - vertices[number, 1]) * uy
         return along > length + tolerance if forward else along < -tolerance
     return False
 
 
+@numba.njit(cache=True)
 def _contradicted(
-    old: list[list[float]], new: list[list[float]], on_map: _Found, tolerance: float
-) -> list[list[float]] | None:
-    """Return ``old`` without the ends the scan contradicts, or ``None`` if none is.
+    old: np.ndarray, new: np.ndarray, arcs: np.ndarray, distances: np.ndarray,
+    before: np.ndarray, after: np.ndarray, tolerance: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return ``old`` without the ends the scan contradicts (empty if none is).
 
-    Where the scan, past the last (first) of its vertices that agree with the map (within
-    ``tolerance``), runs on straight beyond the end of the map edge they agree on while
-    the map turns away, the two disagree on where the surface goes: the map's end beyond
-    that point is what the scan no longer sees there (a moved object's old face, hidden
-    inside the new footprint). It is cut,
-    and the scan's continuation then extends the map like any longer view. Averaging the
-    two instead would pull scan vertices onto the old face and draw an edge across the
-    object.
+    ``arcs`` ... ``after``: the projection of ``new`` onto ``old``. Where the scan, past
+    the last (first) of its vertices that agree with the map (within ``tolerance``), runs
+    on straight beyond the end of the map edge they agree on while the map turns away,
+    the two disagree on where the surface goes: the map's end beyond that point is what
+    the scan no longer sees there (a moved object's old face, hidden inside the new
+    footprint). It is cut, and the scan's continuation then extends the map like any
+    longer view. Averaging the two instead would pull scan vertices onto the old face and
+    draw an edge across the object.
     """
-    arcs, _, distances, before, after = on_map
-    agree = [k for k, distance in enumerate(distances) if distance <= tolerance]
-    if not agree:
-        return None
-    first, last = agree[0], agree[-1]
-    tail = any(
-        distances[k] > tolerance and not after[k]
-        and _past_edge(old, arcs[last], new[k], tolerance, forward=True)
-        for k in range(last + 1, len(arcs))
-    )
-    head = any(
-        distances[k] > tolerance and not before[k]
-        and _past_edge(old, arcs[first], new[k], tolerance, forward=False)
-        for k in range(first)
-    )
+    nothing = np.empty((0, 2))
+    first, last = -1, -1
+    for k in range(distances.size):
+        if distances[k] <= tolerance:
+            last = k
+            if first < 0:
+                first = k
+    if first < 0:
+        return nothing
+    # (Flags as runtime values: a constant argument would compile a kernel per value.)
+    tail, head = False, False
+    for k in range(last + 1, arcs.size):
+        forward = k > last
+        tail = distances[k] > tolerance and not after[k] and _past_edge(
+            old, arcs[last], new[k], tolerance, forward
+        )
+        if tail:
+            break
+    for k in range(first):
+        forward = k > first
+        head = distances[k] > tolerance and not before[k] and _past_edge(
+            old, arcs[first], new[k], tolerance, forward
+        )
+        if head:
+            break
     if not (tail or head):
-        return None
+        return nothing
     cut = old
     if tail:
-        cut = _cut_at(cut, arcs[last], keep_head=True)
+        cut = _cut_at(cut, arcs[last], tail)
     if head:
-        cut = _cut_at(cut, arcs[first], keep_head=False)
-    cut = _distinct_rows(cut)
-    return cut if len(cut) >= 2 else None
+        cut = _cut_at(cut, arcs[first], not head)
+    cut = _distinct(cut)
+    return cut if cut.shape[0] >= 2 else nothing
 
 
+@numba.njit(cache=True)
 def _cut_corner(
-    vertices: list[list[float]], map_arcs: list[float], arc: float, point: list[float],
-    epsilon: float,
-) -> list[float] | None:
-    """Return the corner a map edge cuts off where the scan sees it, or ``None``.
+    vertices: np.ndarray, map_arcs: np.ndarray, arc: float, point: np.ndarray, epsilon: float
+) -> tuple[bool, float, float]:  # pragma: no cover - compiled
+    """Return the corner a map edge cuts off where the scan sees it: ``(found, x, y)``.
 
     The map edge at arc length ``arc`` is a chord across a corner when the lines of the
     edges before and after it meet within ``epsilon`` of ``point`` (the scan's vertex
@@ -521,106 +547,133 @@ def _cut_corner(
     intersection is returned. A corner's first views can cut it like that: one face seen
     at grazing incidence from afar, with a reading or two on it.
     """
-    edge = bisect.bisect_right(map_arcs, arc) - 1
-    if not 1 <= edge <= len(vertices) - 3:
-        return None
-    (ax, ay), (bx, by) = vertices[edge - 1], vertices[edge]
-    (cx, cy), (dx, dy) = vertices[edge + 1], vertices[edge + 2]
+    edge = np.searchsorted(map_arcs, arc, side="right") - 1
+    if not 1 <= edge <= vertices.shape[0] - 3:
+        return False, 0.0, 0.0
+    ax, ay = vertices[edge - 1, 0], vertices[edge - 1, 1]
+    bx, by = vertices[edge, 0], vertices[edge, 1]
+    cx, cy = vertices[edge + 1, 0], vertices[edge + 1, 1]
+    dx, dy = vertices[edge + 2, 0], vertices[edge + 2, 1]
     ux, uy, vx, vy = bx - ax, by - ay, dx - cx, dy - cy
     cross = ux * vy - uy * vx
     if abs(cross) <= MIN_CORNER_SINE * math.hypot(ux, uy) * math.hypot(vx, vy):
-        return None  # nearly parallel faces meet nowhere useful
+        return False, 0.0, 0.0  # nearly parallel faces meet nowhere useful
     t = ((cx - ax) * vy - (cy - ay) * vx) / cross
-    corner = [ax + t * ux, ay + t * uy]
-    return corner if math.dist(corner, point) <= epsilon else None
+    corner_x, corner_y = ax + t * ux, ay + t * uy
+    found = math.hypot(corner_x - point[0], corner_y - point[1]) <= epsilon
+    return found, corner_x, corner_y
 
 
+@numba.njit(cache=True)
 def _merged(
-    old: list[list[float]], new: list[list[float]], alpha: float, tolerance: float,
-    epsilon: float, cut: bool = True,
-) -> list[list[float]]:
-    """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 each)."""
-    on_map = _found(new, old)
-    arcs = on_map[0]
-    if arcs[0] > arcs[-1] or (
-        arcs[0] == arcs[-1]
-        and (new[-1][0] - new[0][0]) * (old[-1][0] - old[0][0])
-        + (new[-1][1] - new[0][1]) * (old[-1][1] - old[0][1])
-        < 0.0
-    ):
-        new = new[::-1]
-        on_map = tuple(values[::-1] for values in on_map)  # type: ignore[assignment]
-    if cut and (kept := _contradicted(old, new, on_map, tolerance)) is not None:
-        return _merged(kept, new, alpha, tolerance, epsilon, cut=False)
-    arcs, feet, distances, before, after = on_map
-    _, scan_feet, scan_distances, scan_before, scan_after = _found(old, new)
-
-    def toward(point: list[float], target: list[float]) -> list[float]:
-        return [
-            point[0] + alpha * (target[0] - point[0]),
-            point[1] + alpha * (target[1] - point[1]),
-        ]
-
+    old: np.ndarray, new: np.ndarray, alpha: float, tolerance: float, epsilon: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 rows)."""
+    cut = True
+    while True:
+        arcs, feet, distances, before, after = _project(new, old)
+        if arcs[0] > arcs[-1] or (
+            arcs[0] == arcs[-1]
+            and (new[-1, 0] - new[0, 0]) * (old[-1, 0] - old[0, 0])
+            + (new[-1, 1] - new[0, 1]) * (old[-1, 1] - old[0, 1])
+            < 0.0
+        ):
+            new = new[::-1].copy()
+            arcs, feet, distances = arcs[::-1].copy(), feet[::-1].copy(), distances[::-1].copy()
+            before, after = before[::-1].copy(), after[::-1].copy()
+        if not cut:
+            break
+        cut = False
+        kept = _contradicted(old, new, arcs, distances, before, after, tolerance)
+        if kept.shape[0] == 0:
+            break
+        old = kept
+    _, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
     # Map vertices facing the scan move toward it.
-    moved = [
-        [x + alpha * (foot_x - x), y + alpha * (foot_y - y)]
-        if not (ahead or behind) and distance <= tolerance
-        else [x, y]
-        for (x, y), (foot_x, foot_y), distance, ahead, behind in zip(
-            old, scan_feet, scan_distances, scan_before, scan_after, strict=True
-        )
-    ]
+    moved = old.copy()
+    for k in range(old.shape[0]):
+        if not (scan_before[k] or scan_after[k]) and scan_distances[k] <= tolerance:
+            moved[k, 0] += alpha * (scan_feet[k, 0] - old[k, 0])
+            moved[k, 1] += alpha * (scan_feet[k, 1] - old[k, 1])
     # Scan vertices facing the map are inserted, pulled toward the map by its weight.
-    inserted = [not (ahead or behind) for ahead, behind in zip(before, after, strict=True)]
-    count = len(new)
+    inserted = np.empty(new.shape[0], np.bool_)
+    for k in range(new.shape[0]):
+        inserted[k] = not (before[k] or after[k])
+    count = new.shape[0]
     prepend, append = 0, 0
-    map_arcs = [0.0, *itertools.accumulate(map(math.dist, old, old[1:]))]
+    map_arcs = _arc_starts(old)
 
     # Start: by how much does the scan reach beyond the map's start?
     reach = distances[0] if before[0] else -arcs[0]
     if reach > tolerance:
         prepend = _run_length(before)
     elif reach >= -tolerance:
-        moved[0] = toward(old[0], new[0])
+        moved[0, 0] = old[0, 0] + alpha * (new[0, 0] - old[0, 0])
+        moved[0, 1] = old[0, 1] + alpha * (new[0, 1] - old[0, 1])
         inserted[0] = False
     # End: the same, mirrored.
     reach = distances[-1] if after[-1] else arcs[-1] - map_arcs[-1]
     if reach > tolerance:
-        append = _run_length(after[::-1])
+        append = _run_length(after[::-1].copy())
     elif reach >= -tolerance:
-        moved[-1] = toward(old[-1], new[-1])
+        moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
+        moved[-1, 1] = old[-1, 1] + alpha * (new[-1, 1] - old[-1, 1])
         inserted[-1] = False
 
-    # Map vertices first on equal arc length, then scan vertices in scan order: the keys
-    # (arc, 0 or 1, index) are unique, so the vertices themselves are never compared.
-    middle = [((map_arcs[k], 0, k), vertex) for k, vertex in enumerate(moved)]
-    # An inner scan vertex farther than epsilon from a map edge that cuts a corner is
-    # averaged with the corner the map's faces imply, not with its foot on the chord:
-    # pulled toward the chord, it would lie within epsilon of it once the map stands for
-    # a few observations, Douglas-Peucker would drop it every time, and the map could
-    # never learn the corner.
-    anchors = [
-        _cut_corner(old, map_arcs, arcs[k], new[k], epsilon)
-        if inserted[k] and 0 < k < count - 1 and distances[k] > epsilon else None
-        for k in range(count)
-    ]
-    middle += [
-        ((arcs[k], 1, k), [foot_x + alpha * (x - foot_x), foot_y + alpha * (y - foot_y)])
-        for k, ((x, y), (foot_x, foot_y)) in enumerate(
-            (vertex, foot if anchor is None else anchor)
-            for vertex, foot, anchor in zip(new, feet, anchors, strict=True)
-        )
-        if inserted[k]
-    ]
-    middle.sort()
-    beyond_start = [new[k] for k in range(prepend) if distances[k] > tolerance]
-    beyond_end = [new[k] for k in range(count - append, count) if distances[k] > tolerance]
-    candidates = [*beyond_start, *(vertex for _, vertex in middle), *beyond_end]
-    kept = [candidates[0]]
-    for previous, point in itertools.pairwise(candidates):
-        if math.dist(point, previous) > DUPLICATE_DISTANCE:
-            kept.append(point)
-    return kept
+    # Map vertices first on equal arc length, then scan vertices in scan order: listed in
+    # that order, a stable sort by arc length keeps it.
+    total = old.shape[0]
+    for k in range(count):
+        total += inserted[k]
+    keys, middle = np.empty(total), np.empty((total, 2))
+    for k in range(old.shape[0]):
+        keys[k] = map_arcs[k]
+    _put_rows(moved, 0, old.shape[0], middle, 0)
+    row = old.shape[0]
+    for k in range(count):
+        if not inserted[k]:
+            continue
+        # An inner scan vertex farther than epsilon from a map edge that cuts a corner is
+        # averaged with the corner the map's faces imply, not with its foot on the chord:
+        # pulled toward the chord, it would lie within epsilon of it once the map stands
+        # for a few observations, Douglas-Peucker would drop it every time, and the map
+        # could never learn the corner.
+        anchor_x, anchor_y = feet[k, 0], feet[k, 1]
+        if 0 < k < count - 1 and distances[k] > epsilon:
+            found, corner_x, corner_y = _cut_corner(old, map_arcs, arcs[k], new[k], epsilon)
+            if found:
+                anchor_x, anchor_y = corner_x, corner_y
+        keys[row] = arcs[k]
+        middle[row, 0] = anchor_x + alpha * (new[k, 0] - anchor_x)
+        middle[row, 1] = anchor_y + alpha * (new[k, 1] - anchor_y)
+        row += 1
+    candidates = np.empty((prepend + total + append, 2))
+    size = 0
+    for k in range(prepend):
+        if distances[k] > tolerance:
+            _put_rows(new, k, k + 1, candidates, size)
+            size += 1
+    # Insertion sort by arc length, stable (a handful of vertices).
+    for k in range(1, total):
+        key, x, y = keys[k], middle[k, 0], middle[k, 1]
+        at = k
+        while at > 0 and keys[at - 1] > key:
+            keys[at] = keys[at - 1]
+            middle[at, 0], middle[at, 1] = middle[at - 1, 0], middle[at - 1, 1]
+            at -= 1
+        keys[at], middle[at, 0], middle[at, 1] = key, x, y
+    _put_rows(middle, 0, total, candidates, size)
+    size += total
+    for k in range(count - append, count):
+        if distances[k] > tolerance:
+            _put_rows(new, k, k + 1, candidates, size)
+            size += 1
+    keep = np.ones(size, np.bool_)
+    for k in range(1, size):
+        gap = math.hypot(candidates[k, 0] - candidates[k - 1, 0],
+                         candidates[k, 1] - candidates[k - 1, 1])
+        keep[k] = gap > DUPLICATE_DISTANCE
+    return candidates[:size][keep]
 
 
 def _edge_lengths(points: np.ndarray) -> np.ndarray:
@@ -634,10 +687,10 @@ def _arc_length(points: np.ndarray) -> float:
 
 def _projection_span(points: np.ndarray, onto: np.ndarray) -> tuple[float, bool]:
     """Return the arc-length span of ``points`` projected on ``onto`` and if one is inside."""
-    found = _project(points, onto)
-    span = float(found.arc.max() - found.arc.min())
+    arc = _project(np.ascontiguousarray(points), onto)[0]
+    span = float(arc.max() - arc.min())
     length = _arc_length(onto)
-    inside = bool(np.any((found.arc > MIN_OVERLAP) & (found.arc < length - MIN_OVERLAP)))
+    inside = bool(np.any((arc > MIN_OVERLAP) & (arc < length - MIN_OVERLAP)))
     return span, inside
 
 

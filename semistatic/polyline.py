@@ -17,6 +17,7 @@ True
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -25,7 +26,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["EMPTY_BOX", "Polyline", "as_polyline"]
+__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_offsets"]
 
 EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 """The bounding box of no points: farther than anything from everything."""
@@ -219,3 +220,31 @@ def as_polyline(obj: Polyline | ArrayLike) -> Polyline:
     if isinstance(obj, Polyline):
         return obj
     return Polyline(obj)
+
+
+def run_offsets(sizes: Iterable[int], count: int) -> np.ndarray:
+    """Return where each of ``count`` consecutive runs of ``sizes`` starts, and the end.
+
+    Examples
+    --------
+    >>> run_offsets([2, 0, 3], 3)
+    array([0, 2, 2, 5])
+    """
+    return np.fromiter(itertools.accumulate(sizes, initial=0), np.int64, count + 1)
+
+
+def pack_vertices(vertices: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(N_k, 2)`` vertex arrays one after the other and their :func:`run_offsets`.
+
+    How compiled kernels take many polylines at once: polyline ``k`` is
+    ``points[offsets[k]:offsets[k + 1]]``.
+
+    Examples
+    --------
+    >>> points, offsets = pack_vertices([np.zeros((2, 2)), np.ones((1, 2))])
+    >>> points.shape, offsets
+    ((3, 2), array([0, 2, 3]))
+    """
+    offsets = run_offsets((array.shape[0] for array in vertices), len(vertices))
+    points = np.concatenate(vertices) if vertices else np.empty((0, 2))
+    return points, offsets

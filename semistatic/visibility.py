@@ -12,6 +12,10 @@ Two parts of the mapper reason about single beams rather than whole polylines:
   (an object moved along its own face: the map's ends agree with the scan, its middle
   does not).
 
+The beams are cast in compiled kernels (numba). The mapper checks all the map polylines
+of an update in one call (:func:`missed_and_cut`, :func:`missing_polylines`,
+:func:`extend_all_ends`); the single-polyline functions are the same call for one.
+
 Examples
 --------
 >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
@@ -24,16 +28,17 @@ True
 
 from __future__ import annotations
 
-import itertools
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.frames import untransform_points
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices
 from semistatic.types import Scan, beam_directions
 
 __all__ = [
@@ -42,9 +47,12 @@ __all__ = [
     "MISSING_FRACTION",
     "BeamCounts",
     "expected_ranges",
+    "extend_all_ends",
     "extend_ends",
     "free_space_cut",
     "is_missing",
+    "missed_and_cut",
+    "missing_polylines",
     "should_be_visible",
     "visible_beams",
 ]
@@ -99,80 +107,63 @@ def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
         if abs(math.remainder(angles[beam] - bearing, 2.0 * math.pi)) <= 0.5 * step:
             ranges[beam] = float(np.hypot(points[0, 0], points[0, 1]))
         return ranges
-    return _edge_hits(points, np.cos(angles), np.sin(angles))
+    return _first_ranges(
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
+        np.cos(angles), np.sin(angles),
+    )
 
 
-def _edge_hits(points: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True)
+def _arc_positions(xs: np.ndarray, ys: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the arc-length position of each vertex ``(xs, ys)`` (``0`` at the first)."""
+    arcs = np.empty(xs.size)
+    arcs[0] = 0.0
+    for k in range(1, xs.size):
+        arcs[k] = arcs[k - 1] + math.hypot(xs[k] - xs[k - 1], ys[k] - ys[k - 1])
+    return arcs
+
+
+@numba.njit(cache=True)
+def _first_crossing(
+    xs: np.ndarray, ys: np.ndarray, arcs: np.ndarray, cos: float, sin: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - compiled
+    """Return where the beam ``(cos, sin)`` from the origin first hits polyline ``(xs, ys)``.
+
+    Sensor-frame vertices (``N >= 2``) with their :func:`_arc_positions`. Returns the
+    range (``inf``: no hit), the arc-length position of the hit, its distance along the
+    hit edge to that edge's nearer end and the sine of the angle between beam and edge
+    (the last three ``nan`` for no hit). The lowest edge wins ties.
+    """
+    best, best_edge, best_fraction, best_denominator = math.inf, -1, 0.0, 0.0
+    for edge in range(xs.size - 1):
+        start_x, start_y = xs[edge], ys[edge]
+        edge_x, edge_y = xs[edge + 1] - start_x, ys[edge + 1] - start_y
+        denominator = cos * edge_y - sin * edge_x
+        if not abs(denominator) > PARALLEL_TOLERANCE:
+            continue  # (nearly) parallel: no hit
+        along_beam = (start_x * edge_y - start_y * edge_x) / denominator
+        along_edge = (start_x * sin - start_y * cos) / denominator
+        if along_beam > 0.0 and 0.0 <= along_edge <= 1.0 and along_beam < best:
+            best, best_edge = along_beam, edge
+            best_fraction, best_denominator = along_edge, denominator
+    if best_edge < 0:
+        return math.inf, math.nan, math.nan, math.nan
+    length = math.hypot(xs[best_edge + 1] - xs[best_edge], ys[best_edge + 1] - ys[best_edge])
+    to_end = min(best_fraction, 1.0 - best_fraction) * length
+    sine = abs(best_denominator) / (length if length > 0.0 else 1.0)
+    return best, arcs[best_edge] + best_fraction * length, to_end, sine
+
+
+@numba.njit(cache=True)
+def _first_ranges(
+    xs: np.ndarray, ys: np.ndarray, cos: np.ndarray, sin: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
     """Return :func:`expected_ranges` of ``N >= 2`` vertices for beam directions (cos, sin)."""
-    return _edge_crossings(points, cos, sin)[0]
-
-
-def _edge_crossings(
-    points: np.ndarray, cos: np.ndarray, sin: np.ndarray, *, arcs: bool = False
-) -> tuple[np.ndarray, _Crossings | None]:
-    """Return each beam's first hit on ``N >= 2`` vertices: range and, with ``arcs``, where.
-
-    Where (:class:`_Crossings`): the arc-length position of the hit along the polyline,
-    its distance along the hit edge to that edge's nearer end, and the sine of the angle
-    between beam and edge (``nan`` for no hit).
-    """
-    starts = points[:-1]
-    edges = np.diff(points, axis=0)
-    dx, dy = cos[:, None], sin[:, None]
-    denominator = dx * edges[:, 1] - dy * edges[:, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        along_beam = (starts[:, 0] * edges[:, 1] - starts[:, 1] * edges[:, 0]) / denominator
-        along_edge = (starts[:, 0] * dy - starts[:, 1] * dx) / denominator
-    hit = (
-        (np.abs(denominator) > PARALLEL_TOLERANCE)
-        & (along_beam > 0.0)
-        & (along_edge >= 0.0)
-        & (along_edge <= 1.0)
-    )
-    ranges = np.where(hit, along_beam, math.inf)
-    if not arcs:
-        return ranges.min(axis=1), None
-    edge = ranges.argmin(axis=1)
-    beams = np.arange(ranges.shape[0])
-    lengths = np.hypot(edges[:, 0], edges[:, 1])
-    position = np.concatenate(([0.0], np.cumsum(lengths)))[edge] + (
-        along_edge[beams, edge] * lengths[edge]
-    )
-    first = ranges[beams, edge]
-    hit_any = np.isfinite(first)
-    fraction = along_edge[beams, edge]
-    to_end = np.minimum(fraction, 1.0 - fraction) * lengths[edge]
-    sine = np.abs(denominator[beams, edge]) / np.where(lengths[edge] > 0.0, lengths[edge], 1.0)
-    return first, _Crossings(
-        np.where(hit_any, position, math.nan),
-        np.where(hit_any, to_end, math.nan),
-        np.where(hit_any, sine, math.nan),
-    )
-
-
-class _Crossings(NamedTuple):
-    """Where beams cross a polyline (see :func:`_edge_crossings`)."""
-
-    arc: np.ndarray
-    to_end: np.ndarray
-    sine: np.ndarray
-
-
-def _beams_in_sector(points: np.ndarray, scan: Scan) -> tuple[int, int]:
-    """Return the beams ``[first, stop)`` of ``scan`` that can hit polyline ``points``.
-
-    ``points`` are ``N >= 2`` vertices in the sensor frame. A straight edge subtends the
-    bearings between its ends, so no beam outside the vertices' bearing interval hits
-    the polyline; one beam more on each side absorbs rounding. An edge that crosses the
-    cut behind the sensor (bearing jump above pi) gets every beam.
-    """
-    count = scan.ranges.size
-    bearings = np.arctan2(points[:, 1], points[:, 0]).tolist()
-    if any(abs(b - a) > math.pi for a, b in itertools.pairwise(bearings)):
-        return 0, count
-    low = (min(bearings) - scan.angle_min) / scan.angle_increment
-    high = (max(bearings) - scan.angle_min) / scan.angle_increment
-    return max(0, math.floor(low) - 1), min(count, math.ceil(high) + 2)
+    arcs = _arc_positions(xs, ys)
+    ranges = np.empty(cos.size)
+    for beam in range(cos.size):
+        ranges[beam] = _first_crossing(xs, ys, arcs, cos[beam], sin[beam])[0]
+    return ranges
 
 
 def extend_ends(
@@ -211,59 +202,81 @@ def extend_ends(
     array([[ 2.    , -0.0175],
            [ 2.    ,  1.022 ]])
     """
-    line = as_polyline(polyline)
-    origin = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    return _extended(line, angle_increment, origin[0], origin[1], limit)
+    return extend_all_ends([as_polyline(polyline)], angle_increment, viewpoint=viewpoint,
+                           limit=limit)[0]
 
 
-def _extended(
-    line: Polyline, angle_increment: float, origin_x: float, origin_y: float, limit: float
-) -> Polyline:
-    """Return :func:`extend_ends` of ``line`` seen from ``(origin_x, origin_y)``."""
-    rows, moved = _extended_rows(line.points.tolist(), angle_increment, origin_x, origin_y, limit)
-    return _observed(line, rows, moved)
+def extend_all_ends(
+    polylines: Sequence[Polyline],
+    angle_increment: float,
+    *,
+    viewpoint: ArrayLike = (0.0, 0.0),
+    limit: float = MAX_END_EXTENSION,
+) -> list[Polyline]:
+    """Return :func:`extend_ends` of many scan polylines of one scan, in one compiled call.
 
+    A polyline whose ends do not move is returned as itself.
 
-def _observed(line: Polyline, rows: list[list[float]], moved: bool) -> Polyline:
-    """Return ``line`` with the vertex rows of :func:`_extended_rows` (itself if unmoved)."""
-    if not moved:
-        return line
+    Examples
+    --------
+    >>> lines = [Polyline([[2.0, 0.0], [2.0, 1.0]]), Polyline([[1.0, 1.0]])]
+    >>> [line.points.round(4).tolist() for line in extend_all_ends(lines, np.radians(1.0))]
+    [[[2.0, -0.0175], [2.0, 1.022]], [[1.0, 1.0]]]
+    """
+    if not polylines:
+        return []
+    origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
+    points, offsets = pack_vertices([line.points for line in polylines])
+    moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
+    bounds = offsets.tolist()
     # Finite vertices moved by a finite shift: nothing to check.
-    return Polyline._trusted(np.array(rows, dtype=np.float64), line.scan_indices)
+    return [
+        Polyline._trusted(points[bounds[k] : bounds[k + 1]], line.scan_indices) if shifted
+        else line
+        for k, (line, shifted) in enumerate(zip(polylines, moved.tolist(), strict=True))
+    ]
 
 
-def _extended_rows(
-    rows: list[list[float]], angle_increment: float, origin_x: float, origin_y: float, limit: float
-) -> tuple[list[list[float]], bool]:
-    """Return :func:`extend_ends` of vertex ``rows`` (a new list) and whether an end moved."""
-    if len(rows) < 2:
-        return rows, False
-    rows = list(rows)
-    moved = False
-    for end, inner, beam_step in ((0, 1, -angle_increment), (-1, -2, angle_increment)):
-        (x, y), (inner_x, inner_y) = rows[end], rows[inner]
-        relative_x, relative_y = x - origin_x, y - origin_y
-        outward_x = relative_x - (inner_x - origin_x)
-        outward_y = relative_y - (inner_y - origin_y)
-        norm = math.hypot(outward_x, outward_y)
-        if norm == 0.0:
+@numba.njit(cache=True)
+def _extended_ends(
+    points: np.ndarray, offsets: np.ndarray, angle_increment: float, origin_x: float,
+    origin_y: float, limit: float,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Move the ends of the polylines packed in ``points`` (in place); return which moved.
+
+    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]``; see :func:`extend_ends`.
+    """
+    moved = np.zeros(offsets.size - 1, np.bool_)
+    for p in range(offsets.size - 1):
+        first, last = offsets[p], offsets[p + 1] - 1
+        if last - first < 1:
             continue
-        outward_x, outward_y = outward_x / norm, outward_y / norm
-        # Where does the neighbouring beam cross the line of the end edge?
-        beam = math.atan2(relative_y, relative_x) + beam_step
-        direction_x, direction_y = math.cos(beam), math.sin(beam)
-        across = direction_x * outward_y - direction_y * outward_x
-        if abs(across) <= PARALLEL_TOLERANCE:
-            continue
-        along_edge = (relative_x * direction_y - relative_y * direction_x) / across
-        along_beam = (relative_x * outward_y - relative_y * outward_x) / across
-        if along_edge <= 0.0 or along_beam <= 0.0:
-            continue
-        shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
-        if shift > 0.0:
-            rows[end] = [x + shift * outward_x, y + shift * outward_y]
-            moved = True
-    return rows, moved
+        for side in range(2):
+            end, inner = (first, first + 1) if side == 0 else (last, last - 1)
+            beam_step = -angle_increment if side == 0 else angle_increment
+            x, y = points[end, 0], points[end, 1]
+            relative_x, relative_y = x - origin_x, y - origin_y
+            outward_x = relative_x - (points[inner, 0] - origin_x)
+            outward_y = relative_y - (points[inner, 1] - origin_y)
+            norm = math.hypot(outward_x, outward_y)
+            if norm == 0.0:
+                continue
+            outward_x, outward_y = outward_x / norm, outward_y / norm
+            # Where does the neighbouring beam cross the line of the end edge?
+            beam = math.atan2(relative_y, relative_x) + beam_step
+            direction_x, direction_y = math.cos(beam), math.sin(beam)
+            across = direction_x * outward_y - direction_y * outward_x
+            if abs(across) <= PARALLEL_TOLERANCE:
+                continue
+            along_edge = (relative_x * direction_y - relative_y * direction_x) / across
+            along_beam = (relative_x * outward_y - relative_y * outward_x) / across
+            if along_edge <= 0.0 or along_beam <= 0.0:
+                continue
+            shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
+            if shift > 0.0:
+                points[end, 0], points[end, 1] = x + shift * outward_x, y + shift * outward_y
+                moved[p] = True
+    return moved
 
 
 class BeamCounts(NamedTuple):
@@ -320,48 +333,224 @@ def visible_beams(
     >>> tuple(visible_beams([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, 0.0)))
     (4, 3, 2)
     """
-    points = untransform_points(pose, as_polyline(polyline).points)
-    states = _beam_states(points, scan, max_range, margin)
-    return BeamCounts(
-        int(states.in_view.sum()), int(states.unoccluded.sum()), int(states.seen_through.sum())
+    view = _View(scan, pose, min(scan.range_max, max_range), margin, 0.0, 0.0)
+    return _beam_passes([as_polyline(polyline)], view, cut=False)[0][0]
+
+
+class _View(NamedTuple):
+    """What the beam passes compare a polyline with: one scan from one pose, thresholds."""
+
+    scan: Scan
+    pose: ArrayLike
+    limit: float
+    """Largest usable range (m): the scan's and the mapper's."""
+    margin: float
+    epsilon: float
+    gate: float
+
+
+def _mapper_view(scan: Scan, pose: ArrayLike, params: MapperParams) -> _View:
+    """Return the :class:`_View` of the mapper with ``params``."""
+    return _View(
+        scan, pose, min(scan.range_max, params.max_range), params.visibility_margin,
+        params.epsilon, params.gate,
     )
 
 
-class _BeamStates(NamedTuple):
-    """Per-beam masks of :func:`visible_beams`, over consecutive beams of a scan."""
+def _beam_passes(
+    lines: Sequence[Polyline], view: _View, *, cut: bool
+) -> tuple[list[BeamCounts], list[list[tuple[float, float]] | None]]:
+    """Return each polyline's :class:`BeamCounts` and, with ``cut``, its remaining spans.
 
-    in_view: np.ndarray
-    unoccluded: np.ndarray
-    seen_through: np.ndarray
-    expected: np.ndarray
-    ranges: np.ndarray
-    crossings: _Crossings | None
-
-
-def _beam_states(
-    points: np.ndarray, scan: Scan, max_range: float, margin: float, *, arcs: bool = False
-) -> _BeamStates:
-    """Return :func:`visible_beams`'s per-beam masks for sensor-frame vertices ``points``.
-
-    Over consecutive beams (only those of the polyline's sector when it has an edge: the
-    others cannot hit it), with the expected and read ranges; ``crossings`` (with
-    ``arcs``, for ``N >= 2`` vertices) says where each beam crosses the polyline.
+    One compiled pass over all polylines (:func:`_through_polylines`). The spans are the
+    arc-length intervals :func:`free_space_cut` keeps, ``None`` where nothing is cut.
+    Polylines of fewer than two vertices are cut nowhere; their counts come from
+    :func:`expected_ranges` on every beam.
     """
-    arc = None
-    if points.shape[0] < 2:
-        expected, ranges = expected_ranges(points, scan.angles()), scan.ranges
-    else:
-        # Only the beams of the polyline's sector can hit it: the others expect inf.
-        first, stop = _beams_in_sector(points, scan)
-        cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
-        expected, arc = _edge_crossings(points, cos[first:stop], sin[first:stop], arcs=arcs)
-        ranges = scan.ranges[first:stop]
-    limit = min(scan.range_max, max_range)
-    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= limit)
+    if not lines:
+        return [], []
+    scan = view.scan
+    points, offsets = pack_vertices([line.points for line in lines])
+    x, y, theta = np.asarray(view.pose, dtype=float).reshape(3).tolist()
+    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    counts, piece_counts, pieces = _through_polylines(
+        points, offsets, x, y, theta, scan.ranges, cos, sin, scan.angle_min,
+        scan.angle_increment, scan.range_min, view.limit, view.margin, view.epsilon,
+        view.gate, cut,
+    )
+    beam_counts, spans, stored = [], [], 0
+    pieces = pieces.tolist()
+    for line, row, number in zip(lines, counts.tolist(), piece_counts.tolist(), strict=True):
+        beam_counts.append(BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view))
+        spans.append(None if number < 0 else pieces[stored : stored + number])
+        stored += max(number, 0)
+    return beam_counts, spans
+
+
+def _point_counts(line: Polyline, view: _View) -> BeamCounts:
+    """Return the :class:`BeamCounts` of a polyline of fewer than two vertices."""
+    scan = view.scan
+    points = untransform_points(view.pose, line.points)
+    expected = expected_ranges(points, scan.angles())
+    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= view.limit)
     with np.errstate(invalid="ignore"):
-        unoccluded = in_view & (ranges >= expected - margin)
-        seen_through = unoccluded & (ranges > expected + margin)
-    return _BeamStates(in_view, unoccluded, seen_through, expected, ranges, arc)
+        unoccluded = in_view & (scan.ranges >= expected - view.margin)
+        seen_through = unoccluded & (scan.ranges > expected + view.margin)
+    return BeamCounts(int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum()))
+
+
+@numba.njit(cache=True)
+def _through_polylines(
+    points: np.ndarray, offsets: np.ndarray, pose_x: float, pose_y: float, pose_theta: float,
+    ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray, angle_min: float,
+    angle_increment: float, range_min: float, limit: float, margin: float, epsilon: float,
+    gate: float, cut: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return the beam counts and free-space cuts of polylines packed in ``points``.
+
+    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]`` (map frame, sensor at
+    ``pose``). Returns ``(P, 3)`` counts (in view, unoccluded, seen through; zeros for
+    fewer than two vertices), ``(P,)`` piece counts (``-1``: not cut, always without
+    ``cut``) and the ``(K, 2)`` arc-length spans of the pieces, polyline after polyline.
+    """
+    count = offsets.size - 1
+    beams = ranges.size
+    counts = np.zeros((count, 3), np.int64)
+    piece_counts = np.full(count, -1, np.int64)
+    pieces = np.empty((count + 4, 2))
+    stored = 0
+    robust = np.zeros(beams, np.bool_)
+    positions = np.empty(beams)
+    spans = np.empty((beams, 2))
+    c, s = math.cos(pose_theta), math.sin(pose_theta)
+    for p in range(count):
+        start, size = offsets[p], offsets[p + 1] - offsets[p]
+        if size < 2:
+            continue
+        xs, ys = np.empty(size), np.empty(size)
+        for k in range(size):
+            dx, dy = points[start + k, 0] - pose_x, points[start + k, 1] - pose_y
+            xs[k], ys[k] = dx * c + dy * s, dy * c - dx * s
+        first, stop = _sector(xs, ys, beams, angle_min, angle_increment)
+        arcs = _arc_positions(xs, ys)
+        length = arcs[size - 1]
+        in_view = unoccluded = seen_through = 0
+        for beam in range(first, stop):
+            expected, arc, to_end, sine = _first_crossing(xs, ys, arcs, cos[beam], sin[beam])
+            reading = ranges[beam]
+            positions[beam - first] = arc
+            robust[beam - first] = False
+            if not (math.isfinite(expected) and range_min <= expected <= limit):
+                continue
+            in_view += 1
+            if not reading >= expected - margin:
+                continue
+            unoccluded += 1
+            if not reading > expected + margin:
+                continue
+            seen_through += 1
+            # Read through wherever within epsilon across the polyline lay.
+            squared_cosine = 1.0 - sine * sine
+            robust[beam - first] = (
+                squared_cosine >= 0.0
+                and to_end * sine >= epsilon * math.sqrt(squared_cosine)
+                and reading > expected + margin + epsilon / sine
+            )
+        counts[p, 0], counts[p, 1], counts[p, 2] = in_view, unoccluded, seen_through
+        if not cut:
+            continue
+        found = _seen_through_spans(robust, positions, max(stop - first, 0), length, gate, spans)
+        if found == 0:
+            continue
+        # The pieces before, between and after the cuts, each at least the gate long.
+        kept, begin = 0, 0.0
+        for k in range(found + 1):
+            end = spans[k, 0] if k < found else length
+            if end > begin and end - begin >= gate:
+                if stored == pieces.shape[0]:
+                    grown = np.empty((2 * stored, 2))
+                    for row in range(stored):  # (a slice assignment compiles shape checks)
+                        grown[row, 0], grown[row, 1] = pieces[row, 0], pieces[row, 1]
+                    pieces = grown
+                pieces[stored, 0], pieces[stored, 1] = begin, end
+                stored += 1
+                kept += 1
+            if k < found:
+                begin = max(begin, spans[k, 1])
+        piece_counts[p] = kept
+    return counts, piece_counts, pieces[:stored]
+
+
+@numba.njit(cache=True)
+def _sector(
+    xs: np.ndarray, ys: np.ndarray, beams: int, angle_min: float, angle_increment: float
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """Return the beams ``[first, stop)`` that can hit sensor-frame vertices ``(xs, ys)``.
+
+    A straight edge subtends the bearings between its ends, so no beam outside the
+    vertices' bearing interval hits the polyline; one beam more on each side absorbs
+    rounding. An edge that crosses the cut behind the sensor (bearing jump above pi)
+    gets every beam.
+    """
+    low = high = previous = math.atan2(ys[0], xs[0])
+    for k in range(1, xs.size):
+        bearing = math.atan2(ys[k], xs[k])
+        if abs(bearing - previous) > math.pi:
+            return 0, beams
+        low, high, previous = min(low, bearing), max(high, bearing), bearing
+    first = math.floor((low - angle_min) / angle_increment) - 1
+    stop = math.ceil((high - angle_min) / angle_increment) + 2
+    return max(0, first), min(beams, stop)
+
+
+@numba.njit(cache=True)
+def _seen_through_spans(
+    flags: np.ndarray, positions: np.ndarray, count: int, length: float, min_span: float,
+    spans: np.ndarray,
+) -> int:  # pragma: no cover - compiled
+    """Write the sorted arc-length spans that seen-through runs cut into ``spans``.
+
+    Runs of at least ``MIN_SEEN_THROUGH`` of the first ``count`` beams' ``flags``; each end
+    of a run reaches half way to its neighbour's crossing (``positions``, ``nan`` for a
+    miss), or the polyline's end (``0`` or ``length``) on the side where that neighbour
+    misses it. Only spans ``min_span`` or longer are kept; returns how many.
+    """
+    found = 0
+    start = 0
+    while start < count:
+        if not flags[start]:
+            start += 1
+            continue
+        stop = start
+        while stop + 1 < count and flags[stop + 1]:
+            stop += 1
+        if stop - start + 1 >= MIN_SEEN_THROUGH:
+            low, high = positions[start], positions[start]
+            for k in range(start + 1, stop + 1):
+                low, high = min(low, positions[k]), max(high, positions[k])
+            for side in range(2):
+                end, neighbour = (start, start - 1) if side == 0 else (stop, stop + 1)
+                at_low = positions[end] == low
+                other = positions[neighbour] if 0 <= neighbour < count else math.nan
+                if math.isnan(other):
+                    bound = 0.0 if at_low else length
+                else:
+                    bound = 0.5 * (positions[end] + other)
+                if at_low:
+                    low = min(low, bound)
+                else:
+                    high = max(high, bound)
+            if high - low >= min_span:
+                # Insertion into the sorted spans (by start, then end).
+                k = found
+                while k > 0 and (spans[k - 1, 0] > low
+                                 or (spans[k - 1, 0] == low and spans[k - 1, 1] > high)):
+                    spans[k] = spans[k - 1]
+                    k -= 1
+                spans[k, 0], spans[k, 1] = low, high
+                found += 1
+        start = stop + 1
+    return found
 
 
 def free_space_cut(
@@ -415,70 +604,49 @@ def free_space_cut(
     ...  for piece in free_space_cut(wall, scan, (0.0, 0.0, 0.0), MapperParams())]
     [[[2.0, -1.0], [2.0, 0.1]], [[2.0, 0.512], [2.0, 1.0]]]
     """
-    line = as_polyline(polyline)
-    points = untransform_points(pose, line.points)
-    if points.shape[0] < 2:
-        return [line]
-    states = _beam_states(points, scan, params.max_range, params.visibility_margin, arcs=True)
-    crossing = states.crossings
-    # Read through wherever within epsilon across the polyline lay (see above).
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cosine = np.sqrt(1.0 - crossing.sine**2)
-        robust = (
-            states.seen_through
-            & (crossing.to_end * crossing.sine >= params.epsilon * cosine)
-            & (states.ranges
-               > states.expected + params.visibility_margin + params.epsilon / crossing.sine)
+    return missed_and_cut([as_polyline(polyline)], scan, pose, params)[0][1]
+
+
+def missed_and_cut(
+    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams
+) -> list[tuple[bool, list[Polyline]]]:
+    """Return :func:`is_missing` and :func:`free_space_cut` of many polylines at once.
+
+    One compiled pass over all of them: what the mapper checks of every map polyline
+    after an update.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
+    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
+    >>> [(missing, len(pieces))
+    ...  for missing, pieces in missed_and_cut([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
+    [(True, 0), (False, 1)]
+    """
+    counts, spans = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=True)
+    return [
+        (
+            _missing(number, params),
+            [line] if kept is None else [_arc_piece(line, low, high) for low, high in kept],
         )
-    cuts = _seen_through_spans(robust, crossing.arc, line.length, params.gate)
-    if not cuts:
-        return [line]
-    pieces, start = [], 0.0
-    for low, high in cuts:
-        if low > start:
-            pieces.append((start, low))
-        start = max(start, high)
-    if start < line.length:
-        pieces.append((start, line.length))
-    return [_arc_piece(line, low, high) for low, high in pieces if high - low >= params.gate]
+        for line, number, kept in zip(polylines, counts, spans, strict=True)
+    ]
 
 
-def _seen_through_spans(
-    seen_through: np.ndarray, arc: np.ndarray, length: float, min_span: float
-) -> list[tuple[float, float]]:
-    """Return the sorted arc-length spans, ``min_span`` or longer, that seen-through runs cut."""
-    flags = seen_through.tolist()
-    positions = arc.tolist()
-    count = len(flags)
-    spans = []
-    start = 0
-    while start < count:
-        if not flags[start]:
-            start += 1
-            continue
-        stop = start
-        while stop + 1 < count and flags[stop + 1]:
-            stop += 1
-        if stop - start + 1 >= MIN_SEEN_THROUGH:
-            run = positions[start : stop + 1]
-            low, high = min(run), max(run)
-            # Each end of the run reaches half way to its neighbour's crossing, or the
-            # polyline's end on the side where that neighbour misses it.
-            for end, neighbour in ((start, start - 1), (stop, stop + 1)):
-                at_low = positions[end] == low
-                other = positions[neighbour] if 0 <= neighbour < count else math.nan
-                if math.isnan(other):
-                    bound = 0.0 if at_low else length
-                else:
-                    bound = 0.5 * (positions[end] + other)
-                if at_low:
-                    low = min(low, bound)
-                else:
-                    high = max(high, bound)
-            if high - low >= min_span:
-                spans.append((low, high))
-        start = stop + 1
-    return sorted(spans)
+def missing_polylines(
+    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams
+) -> list[bool]:
+    """Return :func:`is_missing` of many polylines, in one compiled pass.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
+    >>> missing_polylines([Polyline([[2.0, -1.0], [2.0, 1.0]])], scan, (0.0, 0.0, 0.0),
+    ...                   MapperParams())
+    [True]
+    """
+    counts, _ = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=False)
+    return [_missing(number, params) for number in counts]
 
 
 def _arc_piece(line: Polyline, low: float, high: float) -> Polyline:
@@ -541,7 +709,9 @@ def is_missing(
     >>> is_missing(wall, at_the_wall, (0.0, 0.0, 0.0), MapperParams())
     False
     """
-    counts = visible_beams(
-        polyline, scan, pose, max_range=params.max_range, margin=params.visibility_margin
-    )
+    return missing_polylines([as_polyline(polyline)], scan, pose, params)[0]
+
+
+def _missing(counts: BeamCounts, params: MapperParams) -> bool:
+    """Return :func:`is_missing` from the polyline's beam counts."""
     return _visible(counts, params) and counts.seen_through >= MISSING_FRACTION * counts.unoccluded

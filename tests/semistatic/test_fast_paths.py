@@ -1,11 +1,10 @@
-"""The remaining fast paths give what the slow paths give.
+"""The mapper's shortcuts and compiled kernels give what their slow references give.
 
-Small polylines go through plain-Python twins of the Douglas-Peucker code in
-``extraction`` and ``merge``; each twin is checked here against GEOS on seeded random
-inputs, and the whole mapper against itself with those fast paths and the association's
+The compiled Douglas-Peucker (extraction and merge alike) is checked against GEOS on
+seeded random inputs, and the whole mapper against itself with the association's
 shortcut past the similarities (when the gate alone fixes the optimal path) switched off.
-(``hausdorff``, ``similarity`` and ``association`` have one compiled implementation each,
-tested against their references in their own test modules.)
+(``hausdorff``, ``similarity``, ``association`` and ``visibility`` have one compiled
+implementation each, tested against their references in their own test modules.)
 """
 
 from __future__ import annotations
@@ -20,13 +19,12 @@ import pytest
 import shapely
 
 from semistatic.association import FAR_COST, _optimal_path
-from semistatic.extraction import douglas_peucker_rows
-from semistatic.frames import untransform_points
+from semistatic.extraction import douglas_peucker
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, _replaced
 from semistatic.polyline import EMPTY_BOX, Polyline
 from semistatic.types import Scan
-from semistatic.visibility import expected_ranges, extend_ends, visible_beams
+from semistatic.visibility import extend_ends
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
@@ -47,49 +45,26 @@ def _random_polyline(rng, count, spread=1.0):
 
 
 @pytest.mark.parametrize("seed", range(150))
-def test_douglas_peucker_python_twin_keeps_what_geos_keeps(seed):
+def test_compiled_douglas_peucker_keeps_what_geos_keeps(seed):
     rng = np.random.default_rng(seed)
-    count = int(rng.integers(1, extraction_module.PYTHON_DOUGLAS_PEUCKER + 1))
+    count = int(rng.integers(1, 40))
     points = np.cumsum(rng.normal(0.0, rng.uniform(0.005, 0.5), (count, 2)), axis=0)
     if seed % 3 == 0:
         points = points.round(1)  # exact ties, repeated and collinear points
     epsilon = float(rng.choice([0.0, 0.03, 0.1, 0.3]))
-    kept = douglas_peucker_rows(points.tolist(), epsilon)
+    kept = douglas_peucker(points, epsilon)
     geometry = shapely.Point(points[0]) if count == 1 else shapely.LineString(points)
     expected = shapely.get_coordinates(shapely.simplify(geometry, epsilon, preserve_topology=False))
     np.testing.assert_array_equal(points[kept], expected)
 
 
-@pytest.mark.parametrize("seed", range(40))
-def test_merge_with_python_simplification_equals_merge_with_geos(seed, monkeypatch):
-    rng = np.random.default_rng(seed)
-    old = _random_polyline(rng, int(rng.integers(1, 7)), spread=0.5)
-    new = old[int(rng.integers(0, 2)) :] + rng.normal(0.0, 0.02, (1, 2))
-    new = new + rng.normal(0.0, 0.01, new.shape)
-    weight = float(rng.integers(0, 5))
-    fast = merge_module.merge(old, new, 0.03, map_weight=weight)
-    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
-    slow = merge_module.merge(old, new, 0.03, map_weight=weight)
-    np.testing.assert_array_equal(fast.points, slow.points)
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_merge_simplification_paths_keep_the_same_vertices(seed, monkeypatch):
-    rng = np.random.default_rng(seed)
-    rows = np.cumsum(rng.normal(0.0, 0.05, (int(rng.integers(3, 16)), 2)), axis=0).tolist()
-    fast = merge_module._simplified(rows, 0.03)
-    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
-    slow = merge_module._simplified(rows, 0.03)
-    np.testing.assert_array_equal(fast.points, slow.points)
-    np.testing.assert_array_equal(fast.scan_indices, np.arange(len(fast)))
-
-
 @pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
-def test_distinct_rows_equals_distinct(name):
+def test_distinct_drops_exactly_the_consecutive_repeats(name):
     points = NASTY_POLYLINES[name]
+    expected = [row for k, row in enumerate(points.tolist())
+                if k == 0 or math.dist(row, points[k - 1]) > merge_module.DUPLICATE_DISTANCE]
     np.testing.assert_array_equal(
-        np.array(merge_module._distinct_rows(points.tolist())).reshape(-1, 2),
-        merge_module._distinct(points),
+        merge_module._distinct(points), np.array(expected).reshape(-1, 2)
     )
 
 
@@ -151,7 +126,7 @@ def _run(scans, poses):
     return mapper, reports
 
 
-def test_mapper_with_all_fast_paths_off_gives_the_same_map(monkeypatch):
+def test_mapper_without_the_forced_association_path_gives_the_same_map(monkeypatch):
     rng = np.random.default_rng(11)
     poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(12)]
     world = _hall()
@@ -160,7 +135,6 @@ def test_mapper_with_all_fast_paths_off_gives_the_same_map(monkeypatch):
     ]
     fast_map, fast_reports = _run(scans, poses)
     assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
-    monkeypatch.setattr(merge_module, "PYTHON_DOUGLAS_PEUCKER", 0)
     monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
@@ -324,24 +298,6 @@ def test_near_boxes_equal_shapely_box_distances(seed):
         for a in shapes
     ]
     assert (association_module.box_gaps(boxes, boxes) <= gate).tolist() == expected
-
-
-@pytest.mark.parametrize("seed", range(40))
-def test_visible_beams_in_the_sector_equal_all_beams(seed):
-    rng = np.random.default_rng(seed)
-    world = scene(box(tuple(rng.uniform(-3.0, 3.0, 2)), 1.0, 0.6, rng.uniform(0, 3)),
-                  wall((-4.0, 2.5), (4.0, 2.5)))
-    pose = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-math.pi, math.pi)])
-    scan = cast_scan(world, pose, noise=0.01, rng=rng)
-    # A polyline anywhere around the sensor, behind it (across the +-pi cut) included.
-    line = Polyline(rng.uniform(-4.0, 4.0, (int(rng.integers(2, 6)), 2)))
-    counts = visible_beams(line, scan, pose, margin=0.15)
-    expected = expected_ranges(untransform_points(pose, line.points), scan.angles())
-    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= scan.range_max)
-    with np.errstate(invalid="ignore"):
-        unoccluded = in_view & (scan.ranges >= expected - 0.15)
-        seen_through = unoccluded & (scan.ranges > expected + 0.15)
-    assert tuple(counts) == (in_view.sum(), unoccluded.sum(), seen_through.sum())
 
 
 def test_keep_box_prefilter_changes_nothing(monkeypatch):

@@ -10,7 +10,7 @@ from semistatic.mapper import PolylineMap
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline
 from semistatic.types import Scan
-from semistatic.visibility import free_space_cut
+from semistatic.visibility import free_space_cut, is_missing, missed_and_cut, visible_beams
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
 PARAMS = MapperParams()
@@ -114,3 +114,55 @@ def test_the_cut_is_an_option():
 def test_the_option_is_validated(value):
     with pytest.raises(ValueError, match="free_space_cut"):
         MapperParams(free_space_cut=value)
+
+
+def geos_expected_ranges(points, scan, pose):
+    """Range at which each beam first meets ``points`` (map frame), by GEOS intersection."""
+    line = shapely.LineString(points)
+    origin = shapely.Point(pose[0], pose[1])
+    ranges = np.full(scan.ranges.size, np.inf)
+    for beam, angle in enumerate(pose[2] + scan.angles()):
+        far = (pose[0] + 100.0 * math.cos(angle), pose[1] + 100.0 * math.sin(angle))
+        hit = line.intersection(shapely.LineString([(pose[0], pose[1]), far]))
+        if not hit.is_empty:
+            ranges[beam] = min(origin.distance(part) for part in shapely.get_parts(hit))
+    return ranges
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_beam_counts_of_many_polylines_match_geos(seed):
+    # Several polylines in one compiled pass, anywhere around the sensor (behind it,
+    # across the +-pi cut, included), against ray intersections by GEOS.
+    rng = np.random.default_rng(seed)
+    world = scene(box(tuple(rng.uniform(-3.0, 3.0, 2)), 1.0, 0.6, rng.uniform(0, 3)),
+                  wall((-4.0, 2.5), (4.0, 2.5)))
+    pose = np.array([*rng.uniform(-0.5, 0.5, 2), rng.uniform(-math.pi, math.pi)])
+    scan = cast_scan(world, pose, noise=0.01, rng=rng)
+    lines = [Polyline(rng.uniform(-4.0, 4.0, (int(rng.integers(2, 6)), 2))) for _ in range(4)]
+    params = MapperParams()
+    checked = missed_and_cut(lines, scan, pose, params)
+    for line, (missing, _) in zip(lines, checked, strict=True):
+        expected = geos_expected_ranges(line.points, scan, pose)
+        in_view = (expected >= scan.range_min) & (expected <= min(scan.range_max,
+                                                                  params.max_range))
+        margin = params.visibility_margin
+        unoccluded = in_view & (scan.ranges >= expected - margin)
+        seen_through = unoccluded & (scan.ranges > expected + margin)
+        counts = visible_beams(line, scan, pose, max_range=params.max_range, margin=margin)
+        assert tuple(counts) == (in_view.sum(), unoccluded.sum(), seen_through.sum())
+        assert missing == is_missing(line, scan, pose, params)
+
+
+def test_many_polylines_are_cut_as_each_alone():
+    # In one pass, the wall between others gets the hand-computed cut of the first test
+    # and the others, uncut, come back as themselves.
+    far, point = Polyline([[9.0, -1.0], [9.0, 1.0]]), Polyline([[2.0, 0.3]])
+    scan = wall_scan(slice(30, 36))
+    checked = missed_and_cut([far, point, WALL, far], scan, ORIGIN, PARAMS)
+    for k in (0, 1, 3):
+        assert checked[k][1][0] is (far, point, None, far)[k]
+    crossing = 2.0 * np.tan(-0.5 + 0.02 * np.arange(51))
+    low, high = 0.5 * (crossing[29] + crossing[30]), 0.5 * (crossing[35] + crossing[36])
+    pieces = np.array([piece.points for piece in checked[2][1]])
+    np.testing.assert_allclose(pieces, [[[2.0, -1.0], [2.0, low]], [[2.0, high], [2.0, 1.0]]],
+                               atol=1e-12)
