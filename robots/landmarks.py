@@ -383,15 +383,16 @@ def _posts_from_groups(
 
 
 @numba.njit(cache=True)
-def _pairwise_sum(values, count):  # pragma: no cover - compiled
-    """Return ``values[:count].sum()`` summed in numpy's order (pairwise, 8 accumulators).
+def _pairwise_sum(values):  # pragma: no cover - compiled
+    """Return ``values.sum()`` summed in numpy's order (pairwise, 8 accumulators).
 
     Examples
     --------
     >>> values = np.random.default_rng(0).uniform(0.0, 1.0, 41) * 10.0 ** np.arange(-20, 21)
-    >>> bool(_pairwise_sum(values, 41) == values.sum())
+    >>> bool(_pairwise_sum(values) == values.sum())
     True
     """
+    count = values.size
     if count < 8:
         total = 0.0
         for i in range(count):
@@ -418,8 +419,8 @@ def _pairwise_sum(values, count):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _dot(a, b, count):  # pragma: no cover - compiled
-    """Return ``a[:count] @ b[:count]`` summed in the order of numpy's ``einsum``.
+def _dot(a, b):  # pragma: no cover - compiled
+    """Return ``a @ b`` (equal sizes) summed in the order of numpy's ``einsum``.
 
     That order: two lanes (even and odd indices), blocks of eight folded in from the
     last pair of the block, the remainder pair by pair, then the lanes added.
@@ -428,9 +429,10 @@ def _dot(a, b, count):  # pragma: no cover - compiled
     --------
     >>> rng = np.random.default_rng(0)
     >>> a, b = rng.uniform(0.0, 1.0, 41) * 10.0 ** np.arange(-20, 21), rng.normal(size=41)
-    >>> bool(_dot(a, b, 41) == np.einsum("k,k->", a, b))
+    >>> bool(_dot(a, b) == np.einsum("k,k->", a, b))
     True
     """
+    count = a.size
     even, odd = 0.0, 0.0
     i = 0
     while count - i >= 8:
@@ -573,14 +575,14 @@ def _centre_estimates(
     along, slope_range, slope_bearing = np.zeros(padded), np.zeros(padded), np.zeros(padded)
     beam_weights, squares_w, squares_r = np.zeros(padded), np.zeros(padded), np.zeros(padded)
     for g in range(count):
-        total = _pairwise_sum(likelihoods[g], _BEARING_CANDIDATES)
+        total = _pairwise_sum(likelihoods[g])
         for k in range(_BEARING_CANDIDATES):
             weights[k] = likelihoods[g, k] / total
-        mean = _dot(weights, candidates[g], _BEARING_CANDIDATES)
+        mean = _dot(weights, candidates[g])
         for k in range(_BEARING_CANDIDATES):
             offset = candidates[g, k] - mean
             spread[k] = offset * offset
-        variance = _dot(weights, spread, _BEARING_CANDIDATES)
+        variance = _dot(weights, spread)
         if not highs[g] > lows[g]:
             mean, variance = 0.5 * (lows[g] + highs[g]), 0.0
         variance = variance + bearing_variance_floor
@@ -603,17 +605,17 @@ def _centre_estimates(
             beam_variance = range_variance * (slope_range[b] * slope_range[b]) + variance * (
                 slope_bearing[b] * slope_bearing[b])
             beam_weights[b] = 1.0 / max(beam_variance, _MIN_RANGE_VARIANCE)
-        total = _pairwise_sum(beam_weights, padded)
+        total = _pairwise_sum(beam_weights)
         for b in range(size):
             beam_weights[b] /= total
-        distance[g] = _dot(beam_weights, along, padded)
+        distance[g] = _dot(beam_weights, along)
         if not variances:
             continue
-        coupling = _dot(beam_weights, slope_bearing, padded)
+        coupling = _dot(beam_weights, slope_bearing)
         for b in range(size):
             squares_w[b] = beam_weights[b] * beam_weights[b]
             squares_r[b] = slope_range[b] * slope_range[b]
-        range_variances[g] = _dot(squares_w, squares_r, padded) * range_variance + (
+        range_variances[g] = _dot(squares_w, squares_r) * range_variance + (
             coupling * coupling) * variance
         cross[g] = coupling * variance
     return distance, range_variances, cross, bearing, bearing_variance

@@ -497,5 +497,5 @@ def test_sums_follow_numpy_order_to_the_bit(count):
     for _ in range(200):
         a = rng.uniform(0.0, 1.0, count) * 10.0 ** rng.integers(-6, 6, count)
         b = rng.normal(size=count)
-        assert landmarks_module._pairwise_sum(a, count) == a.sum()
-        assert landmarks_module._dot(a, b, count) == np.einsum("gk,gk->g", a[None], b[None])[0]
+        assert landmarks_module._pairwise_sum(a) == a.sum()
+        assert landmarks_module._dot(a, b) == np.einsum("gk,gk->g", a[None], b[None])[0]
