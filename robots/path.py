@@ -530,8 +530,15 @@ def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
     >>> _cubic_at(breaks, coefficients, 1.5, 0)
     (1.5, 1.0, 0.0)
     """
-    piece = np.searchsorted(breaks, x, side="right") - 1
-    piece = min(max(piece, 0), breaks.size - 2)
+    # The last break <= x among breaks[1:-1] (numpy.searchsorted, side "right", clamped
+    # to the first and last piece); a plain bisection compiles much faster.
+    piece, top = 0, breaks.size - 2
+    while piece < top:
+        middle = (piece + top + 1) // 2
+        if breaks[middle] <= x:
+            piece = middle
+        else:
+            top = middle - 1
     h = x - breaks[piece]
     c3, c2 = coefficients[0, piece, column], coefficients[1, piece, column]
     c1, c0 = coefficients[2, piece, column], coefficients[3, piece, column]
@@ -550,9 +557,7 @@ def _slope_at(breaks, coefficients, t, x, y):  # pragma: no cover - compiled
     return ox * dx + oy * dy, (dx * dx + dy * dy) + (ox * ddx + oy * ddy), px, py
 
 
-# Division by a zero second derivative gives inf/nan (numpy's model), which the bracket
-# test then rejects, as in an array computation.
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True)
 def _project_points(
     xs, ys, lo, hi, coarse_s, coarse_t, coarse_x, coarse_y, breaks, coefficients,
     s_to_t_breaks, s_to_t_coefficients, t_to_s_breaks, t_to_s_coefficients,
@@ -596,6 +601,8 @@ def _project_points(
     position_x, position_y = np.empty(rows), np.empty(rows)
     active = np.empty(rows, dtype=np.bool_)
     distance, key = np.empty(count), np.empty(count)
+    picked = np.zeros(count, dtype=np.bool_)
+    ranked = np.empty(basins, dtype=np.int64)
     for p in range(points):
         x, y = xs[p], ys[p]
         for k in range(count):
@@ -605,7 +612,17 @@ def _project_points(
             minimum = (k == 0 or distance[k] <= distance[k - 1]) and (
                 k == count - 1 or distance[k] <= distance[k + 1])
             key[k] = distance[k] if minimum else np.inf
-        ranked = np.argsort(key, kind="mergesort")
+        # The first `basins` of a stable sort by key: each pick is the earliest smallest
+        # key not picked yet.
+        for b in range(basins):
+            best = -1
+            for k in range(count):
+                if not picked[k] and (best < 0 or key[k] < key[best]):
+                    best = k
+            picked[best] = True
+            ranked[b] = best
+        for k in range(basins):
+            picked[ranked[k]] = False
         for b in range(basins):
             best = ranked[b]
             r = b * points + p
@@ -637,12 +654,13 @@ def _project_points(
                 low[r] = t[r]
             if slope > 0.0:
                 high[r] = t[r]
-            newton = t[r] - slope / second
-            # Inclusive bounds: a converged Newton step lands on the bracket end it set.
-            if second > 0.0 and low[r] <= newton <= high[r]:
-                step[r] = newton - t[r]
-            else:
-                step[r] = 0.5 * (low[r] + high[r]) - t[r]
+            # Newton inside the bracket, else bisection. Inclusive bounds: a converged
+            # Newton step lands on the bracket end it set.
+            step[r] = 0.5 * (low[r] + high[r]) - t[r]
+            if second > 0.0:
+                newton = t[r] - slope / second
+                if low[r] <= newton <= high[r]:
+                    step[r] = newton - t[r]
             small = small and abs(step[r]) < PROJECTION_TOLERANCE
         if small:
             converged = True
