@@ -270,16 +270,6 @@ def _post_groups(
     accepted groups as arrays: first beam, beam count, first centre distance estimate
     (nearest return + radius), angles of the first and last bright beam and of the
     missed beams just outside them (the silhouette ends before those).
-
-    Examples
-    --------
-    >>> angles = np.radians(np.arange(-2.0, 2.5, 0.5))
-    >>> ranges = np.array([5.0, 5.0, 5.0, 1.97, 1.96, 1.97, 5.0, 5.0, 5.0])
-    >>> intensities = np.where(ranges < 3.0, 0.95, 0.1)
-    >>> firsts, sizes, distance, *_ = _post_groups(
-    ...     ranges, intensities, angles, 0.0, 30.0, 0.5, angles[1] - angles[0], 0.04, 0.012, 1)
-    >>> firsts.tolist(), sizes.tolist(), distance.round(2).tolist()
-    ([3], [3], [2.0])
     """
     count = ranges.size
     max_jump = 2.0 * radius + 3.0 * range_sigma
@@ -464,17 +454,6 @@ def _bearing_exponents(
     beams' individual estimates) and the range misfit of the circle computed. Returns
     ``lows, highs, candidates (G, K)`` and ``-misfit / 2`` shifted to a maximum of 0 (the
     caller exponentiates: the posterior weights up to a factor).
-
-    Examples
-    --------
-    >>> angles = np.radians(np.arange(-2.0, 2.5, 0.5))
-    >>> ranges = np.array([5.0, 5.0, 5.0, 1.97, 1.96, 1.97, 5.0, 5.0, 5.0])
-    >>> one = np.ones(1)
-    >>> lows, highs, grid, exponents = _bearing_exponents(
-    ...     ranges, angles, np.array([3]), np.array([3]), angles[3] * one, angles[5] * one,
-    ...     angles[2] * one, angles[6] * one, 2.0 * one, 0.04, 0.04**2, 1e-4)
-    >>> bool(lows[0] < 0.0 < highs[0]), grid.shape, float(exponents.max())
-    (True, (1, 41), 0.0)
     """
     count = firsts.size
     lows, highs = np.empty(count), np.empty(count)
@@ -552,17 +531,6 @@ def _centre_estimates(
 
     Returns ``distance, range_variance, cross, bearing, bearing_variance``, one per post.
     Sums run in numpy's order over the posts' beams padded to the largest group.
-
-    Examples
-    --------
-    >>> angles = np.radians(np.arange(-2.0, 2.5, 0.5))
-    >>> ranges = np.array([5.0, 5.0, 5.0, 1.97, 1.96, 1.97, 5.0, 5.0, 5.0])
-    >>> grid = np.linspace(-0.001, 0.001, 41)[None]
-    >>> distance, _, _, bearing, _ = _centre_estimates(
-    ...     ranges, angles, np.array([3]), np.array([3]), grid[:, 0], grid[:, -1], grid,
-    ...     np.ones((1, 41)), 0.04**2, 0.002**2, 1e-4, 1e-6, True)
-    >>> round(float(distance[0]), 3), round(float(bearing[0]), 9) + 0.0
-    (2.0, 0.0)
     """
     count = firsts.size
     padded = 0

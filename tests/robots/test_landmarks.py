@@ -450,6 +450,8 @@ def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_group
         hit_ranges.append(rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size))
     # The groups side by side in one "scan" (their angles need not be monotonic here).
     ranges, angles = np.concatenate(hit_ranges), np.concatenate(hit_angles)
+    # Read-only, as a Scan's arrays: the kernels' compiled version for scans serves.
+    ranges.flags.writeable = angles.flags.writeable = False
     firsts = np.cumsum([0, *sizes[:-1]]).astype(np.int64)
     counts = np.array(sizes, dtype=np.int64)
     firsts_angle = np.array([group[0] for group in hit_angles])
