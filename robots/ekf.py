@@ -54,6 +54,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from numpy.typing import ArrayLike
@@ -520,14 +521,10 @@ class EKFLocalizer:
             return []
         obs_index = [k for k, _ in pairs]
         landmark_index = [m for _, m in pairs]
-        measured = measured_all[obs_index].reshape(-1, 1)
-        expected = predicted[landmark_index].reshape(-1, 1)
-        jacobian = jacobians[landmark_index].reshape(-1, self._dim)
-        count = len(pairs)
-        noise = np.zeros((2 * count, 2 * count))
-        # The (count, 2, count, 2) view's diagonal blocks are the per-observation noises.
-        blocks = np.arange(count)
-        noise.reshape(count, 2, count, 2)[blocks, :, blocks, :] = noise_all[obs_index]
+        measured, expected, jacobian, noise = _stacked_pairs(
+            measured_all, noise_all, predicted, jacobians,
+            np.array(obs_index, dtype=np.int64), np.array(landmark_index, dtype=np.int64),
+        )
         self._filter.update(
             measured,
             lambda _x: jacobian,
@@ -759,6 +756,43 @@ class EKFLocalizer:
             "range_bias": np.array([r.range_bias for r in records], dtype=float),
             "range_bias_sigma": np.array([r.range_bias_sigma for r in records], dtype=float),
         }
+
+
+@numba.njit(cache=True)
+def _stacked_pairs(
+    measured_all, noise_all, predicted, jacobians, observations, landmarks
+):  # pragma: no cover - compiled
+    """Return the stacked measurement, prediction, Jacobian and noise of matched pairs.
+
+    Pair ``i`` is observation ``observations[i]`` (row of ``measured_all`` and
+    ``noise_all``) with landmark ``landmarks[i]`` (row of ``predicted`` and
+    ``jacobians``): rows ``2i, 2i + 1`` of the ``(2n, 1)`` measurement and prediction and
+    of the ``(2n, D)`` Jacobian; the ``(2n, 2n)`` noise is block diagonal.
+
+    Examples
+    --------
+    >>> measured, expected, jacobian, noise = _stacked_pairs(
+    ...     np.array([[2.0, 0.1], [3.0, 0.2]]), np.array([np.eye(2), 2 * np.eye(2)]),
+    ...     np.array([[2.1, 0.1]]), np.ones((1, 2, 3)), np.array([1]), np.array([0]))
+    >>> measured.ravel().tolist(), expected.ravel().tolist(), jacobian.shape
+    ([3.0, 0.2], [2.1, 0.1], (2, 3))
+    >>> noise.tolist()
+    [[2.0, 0.0], [0.0, 2.0]]
+    """
+    count, columns = observations.size, jacobians.shape[2]
+    measured, expected = np.empty((2 * count, 1)), np.empty((2 * count, 1))
+    jacobian = np.empty((2 * count, columns))
+    noise = np.zeros((2 * count, 2 * count))
+    for i in range(count):
+        k, m = observations[i], landmarks[i]
+        for row in range(2):
+            measured[2 * i + row, 0] = measured_all[k, row]
+            expected[2 * i + row, 0] = predicted[m, row]
+            for column in range(columns):
+                jacobian[2 * i + row, column] = jacobians[m, row, column]
+            for column in range(2):
+                noise[2 * i + row, 2 * i + column] = noise_all[k, row, column]
+    return measured, expected, jacobian, noise
 
 
 def _largest_sigma(cov: np.ndarray) -> float:

@@ -30,7 +30,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -242,306 +241,352 @@ def detect_landmarks(
         )
     ranges = scan.ranges
     angles = beam_angles(ranges.size, scan.angle_min, scan.angle_increment)
-    # Scan.valid_mask() without its errstate block (comparisons with nan do not warn).
-    valid = np.isfinite(ranges)
-    valid &= ranges >= scan.range_min
-    valid &= ranges <= scan.range_max
-    bright = valid & (scan.intensities >= intensity_threshold)
-    indices = np.flatnonzero(bright)
-    if indices.size == 0:
-        return []
-    max_jump = 2.0 * post_radius + 3.0 * range_sigma
-    hit_ranges = ranges[indices]
-    # A group starts at the first bright beam and after every gap or range jump.
-    first_of_group = np.empty(indices.size, dtype=bool)
-    first_of_group[0] = True
-    np.greater(indices[1:] - indices[:-1], 1, out=first_of_group[1:])
-    first_of_group[1:] |= np.abs(hit_ranges[1:] - hit_ranges[:-1]) > max_jump
-    starts = np.flatnonzero(first_of_group)
     groups = _post_groups(
-        indices,
-        starts,
         ranges,
+        scan.intensities,
         angles,
-        valid,
-        scan.angle_increment,
-        post_radius,
-        range_sigma,
-        min_beams,
+        float(scan.range_min),
+        float(scan.range_max),
+        float(intensity_threshold),
+        float(scan.angle_increment),
+        float(post_radius),
+        float(range_sigma),
+        int(min_beams),
     )
-    if not groups:
+    if groups[0].size == 0:
         return []
     return _posts_from_groups(groups, ranges, angles, post_radius, range_sigma, bearing_sigma)
 
 
-class _Group(NamedTuple):
-    """One group of bright beams that passed the shape checks of a post."""
-
-    beams: np.ndarray
-    distance: float  # first estimate of the centre distance: nearest return + radius, m
-    first_angle: float  # angles of the first and last bright beam
-    last_angle: float
-    low_miss: float  # angle of the missed beam before the group (the silhouette ends after it)
-    high_miss: float  # angle of the missed beam after the group
-
-
+@numba.njit(cache=True)
 def _post_groups(
-    indices: np.ndarray,
-    starts: np.ndarray,
-    ranges: np.ndarray,
-    angles: np.ndarray,
-    valid: np.ndarray,
-    increment: float,
-    radius: float,
-    range_sigma: float,
-    min_beams: int,
-) -> list[_Group]:
+    ranges, intensities, angles, range_min, range_max, intensity_threshold, increment,
+    radius, range_sigma, min_beams,
+):  # pragma: no cover - compiled
     """Return the groups of bright beams whose extent fits a post, in scan order.
 
-    A group starts at each position ``starts`` of ``indices`` (the bright beams).
+    Consecutive valid beams at or above ``intensity_threshold`` form a group, split where
+    the range jumps by more than a post's diameter (plus 3 range sigmas). Returns the
+    accepted groups as arrays: first beam, beam count, first centre distance estimate
+    (nearest return + radius), angles of the first and last bright beam and of the
+    missed beams just outside them (the silhouette ends before those).
     """
-    hit_ranges = ranges[indices]
-    # Per-group nearest and farthest return in one pass; the checks are then on floats.
-    nears = np.minimum.reduceat(hit_ranges, starts).tolist()
-    fars = np.maximum.reduceat(hit_ranges, starts).tolist()
-    stops = [*starts[1:].tolist(), indices.size]
-    firsts = indices[starts].tolist()
-    lasts = indices[np.asarray(stops) - 1].tolist()
-    last_beam = ranges.size - 1
-    groups = []
-    for start, stop, first, last, near, far in zip(
-        starts.tolist(), stops, firsts, lasts, nears, fars, strict=True
-    ):
-        if stop - start < min_beams:
+    count = ranges.size
+    max_jump = 2.0 * radius + 3.0 * range_sigma
+    last_beam = count - 1
+    firsts, sizes = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+    distance, first_angle, last_angle = np.empty(count), np.empty(count), np.empty(count)
+    low_miss, high_miss = np.empty(count), np.empty(count)
+    accepted = 0
+    i = 0
+    while i < count:
+        r = ranges[i]
+        if not (math.isfinite(r) and range_min <= r <= range_max
+                and intensities[i] >= intensity_threshold):
+            i += 1
+            continue
+        # A group: the bright beams from i on, until a gap or a range jump.
+        first, near, far = i, r, r
+        while i + 1 < count:
+            following = ranges[i + 1]
+            if not (math.isfinite(following) and range_min <= following <= range_max
+                    and intensities[i + 1] >= intensity_threshold):
+                break
+            if abs(following - ranges[i]) > max_jump:
+                break
+            i += 1
+            near, far = min(near, following), max(far, following)
+        last = i
+        i += 1
+        size = last - first + 1
+        if size < min_beams:
             continue
         if first == 0 or last == last_beam:
             continue  # cut by the edge of the field of view: its centre is unknowable
         if far - near > radius + 3.0 * range_sigma:
             continue
-        distance = near + radius
-        half_width = math.asin(min(1.0, radius / distance))
-        first_angle, last_angle = float(angles[first]), float(angles[last])
-        if last_angle - first_angle > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
+        centre = near + radius
+        half_width = math.asin(min(1.0, radius / centre))
+        if angles[last] - angles[first] > 2.0 * half_width + _WIDTH_SLACK_STEPS * increment:
             continue  # too wide for a post: a reflective strip, a shiny wall
-        if stop - start < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
+        if size < math.floor(2.0 * half_width / increment) - _MISSING_BEAMS_ALLOWED:
             continue  # too narrow: a post this close covers more beams (a speck, a glint)
         # A neighbour beam in front of the post hides part of it: the visible part's middle
         # is not the centre, and no honest small covariance exists, so the post is skipped.
         occluder_limit = near - _OCCLUDER_SIGMAS * range_sigma
-        before, after = first - 1, last + 1
-        if (valid[before] and ranges[before] < occluder_limit) or (
-            valid[after] and ranges[after] < occluder_limit
-        ):
+        before, after = ranges[first - 1], ranges[last + 1]
+        if (math.isfinite(before) and range_min <= before <= range_max
+                and before < occluder_limit):
             continue
-        groups.append(
-            _Group(
-                indices[start:stop],
-                distance,
-                first_angle,
-                last_angle,
-                float(angles[first - 1]),
-                float(angles[last + 1]),
-            )
-        )
-    return groups
+        if math.isfinite(after) and range_min <= after <= range_max and after < occluder_limit:
+            continue
+        firsts[accepted], sizes[accepted], distance[accepted] = first, size, centre
+        first_angle[accepted], last_angle[accepted] = angles[first], angles[last]
+        low_miss[accepted], high_miss[accepted] = angles[first - 1], angles[last + 1]
+        accepted += 1
+    return (firsts[:accepted], sizes[:accepted], distance[:accepted], first_angle[:accepted],
+            last_angle[:accepted], low_miss[:accepted], high_miss[:accepted])
 
 
 def _posts_from_groups(
-    groups: list[_Group],
+    groups: tuple[np.ndarray, ...],
     ranges: np.ndarray,
     angles: np.ndarray,
     radius: float,
     range_sigma: float,
     bearing_sigma: float,
 ) -> list[LandmarkObservation]:
-    """Estimate the centre of every accepted group at once and return the observations.
+    """Estimate the centre of every accepted group and return the observations.
 
-    The groups' beams are stacked into ``(G, B)`` arrays padded to the largest group
-    (``mask`` marks the real beams), so each estimation step is one numpy pass over all
-    posts of the scan rather than one per post.
+    Each round is two compiled passes over all posts of the scan (:func:`_bearing_exponents`
+    and :func:`_centre_estimates`) with numpy's ``exp`` between them: numpy's vectorised
+    ``exp`` rounds differently from the C library's in the last bit, and the kernels
+    reproduce the former numpy arithmetic operation for operation, so the estimates are
+    bit for bit those of the former numpy implementation (the closed loop's results stay
+    identical).
     """
-    # A group's beams are consecutive: row g holds first_g, first_g + 1, ... and then
-    # repeats first_g, so padding is a real (finite) hit that the mask keeps out of sums.
-    firsts = np.array([int(group.beams[0]) for group in groups])
-    sizes = np.array([group.beams.size for group in groups])
-    offsets = np.arange(int(sizes.max()))
-    mask = offsets < sizes[:, None]
-    beams = firsts[:, None] + offsets * mask
-    hits = _Hits(ranges[beams], angles[beams], mask)
-    distance = [group.distance for group in groups]
+    firsts, sizes, distance, first_angle, last_angle, low_miss, high_miss = groups
     likelihood_sigma = max(range_sigma, _RANGE_SIGMA_FLOOR)
+    # Python's ``x**2`` (C pow) and numpy's square both round the exact square correctly.
+    radius_sq, likelihood_variance = radius**2, likelihood_sigma**2
+    range_variance_beam, floor_sq = range_sigma**2, (_GRAZING_DEPTH * radius) ** 2
     for iteration in range(_CENTRE_ITERATIONS):
-        lows, highs = [], []
-        for group, centre in zip(groups, distance, strict=True):
-            half_width = math.asin(min(1.0, radius / centre))
-            low = group.last_angle - half_width
-            high = group.first_angle + half_width
-            # The neighbouring beams missed the post: its silhouette ends before them.
-            low = max(low, group.low_miss + half_width)
-            high = min(high, group.high_miss - half_width)
-            if low > high:  # noise made the bounds cross: fall back to the hits alone
-                low, high = sorted((group.last_angle - half_width, group.first_angle + half_width))
-            lows.append(low)
-            highs.append(high)
-        bearing, bearing_variance = _centre_bearings(
-            hits, np.array(lows), np.array(highs), radius, likelihood_sigma
+        lows, highs, candidates, exponents = _bearing_exponents(
+            ranges, angles, firsts, sizes, first_angle, last_angle, low_miss, high_miss,
+            distance, radius, radius_sq, likelihood_variance,
         )
-        bearing_variance = bearing_variance + bearing_sigma**2
-        # Only the last round's range variance and cross term are reported.
-        distance, range_variance, cross = _centre_ranges(
-            hits,
-            bearing,
-            radius,
-            range_sigma,
-            bearing_variance,
-            variances=iteration == _CENTRE_ITERATIONS - 1,
+        distance, range_variance, cross, bearing, bearing_variance = _centre_estimates(
+            ranges, angles, firsts, sizes, lows, highs, candidates, np.exp(exponents),
+            radius_sq, floor_sq, range_variance_beam, bearing_sigma**2,
+            iteration == _CENTRE_ITERATIONS - 1,
         )
-        distance = distance.tolist()
+    covariance = np.empty((firsts.size, 2, 2))
+    covariance[:, 0, 0], covariance[:, 1, 1] = range_variance, bearing_variance
+    covariance[:, 0, 1] = covariance[:, 1, 0] = cross
+    beams = np.arange(ranges.size)
     return [
-        LandmarkObservation._trusted(
-            centre, direction, np.array([[r_var, c], [c, b_var]]), group.beams
-        )
-        for group, centre, direction, r_var, c, b_var in zip(
-            groups,
-            distance,
-            bearing.tolist(),
-            range_variance.tolist(),
-            cross.tolist(),
-            bearing_variance.tolist(),
-            strict=True,
-        )
+        LandmarkObservation._trusted(centre, direction, covariance[g], beams[first:first + size])
+        for g, (centre, direction, first, size) in enumerate(zip(
+            distance.tolist(), bearing.tolist(), firsts.tolist(), sizes.tolist(), strict=True
+        ))
     ]
 
 
-class _Hits:
-    """The bright beams of G groups as padded ``(G, B)`` arrays, with what both passes reuse.
+@numba.njit(cache=True)
+def _pairwise_sum(values):  # pragma: no cover - compiled
+    """Return ``values.sum()`` summed in numpy's order (pairwise, 8 accumulators).
 
-    ``mask`` marks real beams; padded entries repeat a real hit, so every value stays
-    finite and multiplying by the 0/1 ``weight`` removes them from sums exactly.
-
+    Examples
+    --------
+    >>> values = np.random.default_rng(0).uniform(0.0, 1.0, 41) * 10.0 ** np.arange(-20, 21)
+    >>> bool(_pairwise_sum(values) == values.sum())
+    True
     """
+    count = values.size
+    if count < 8:
+        total = 0.0
+        for i in range(count):
+            total += values[i]
+        return total
+    r0, r1, r2, r3 = values[0], values[1], values[2], values[3]
+    r4, r5, r6, r7 = values[4], values[5], values[6], values[7]
+    i = 8
+    while i < count - count % 8:
+        r0 += values[i]
+        r1 += values[i + 1]
+        r2 += values[i + 2]
+        r3 += values[i + 3]
+        r4 += values[i + 4]
+        r5 += values[i + 5]
+        r6 += values[i + 6]
+        r7 += values[i + 7]
+        i += 8
+    total = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < count:
+        total += values[i]
+        i += 1
+    return total
 
-    def __init__(self, ranges: np.ndarray, angles: np.ndarray, mask: np.ndarray) -> None:
-        self.ranges, self.angles, self.mask = ranges, angles, mask
-        self.weight = mask.astype(float)
-        self.count = mask.sum(axis=1)
-        # (G, B, 1) views for the (G, B, candidates) arrays of the bearing likelihood.
-        self.ranges_3d = ranges[:, :, None]
-        self.weight_3d = self.weight[:, :, None]
-        self.count_3d = self.count[:, None, None]
-        self.sin_3d = np.sin(angles)[:, :, None]
-        self.cos_3d = np.cos(angles)[:, :, None]
 
+@numba.njit(cache=True)
+def _dot(a, b):  # pragma: no cover - compiled
+    """Return ``a @ b`` (equal sizes) summed in the order of numpy's ``einsum``.
 
-# The candidate grid of numpy.linspace(low, high, n): ramp * step + low, then the end.
-# (linspace's special case for a step that underflows to 0 only matters for intervals
-# below 1e-320 rad, which round to a point either way.)
-_RAMP = np.arange(_BEARING_CANDIDATES, dtype=float)
+    That order: two lanes (even and odd indices), blocks of eight folded in from the
+    last pair of the block, the remainder pair by pair, then the lanes added.
 
-
-def _centre_bearings(
-    hits: _Hits,
-    low: np.ndarray,
-    high: np.ndarray,
-    radius: float,
-    range_sigma: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Return the posterior mean and variance of each centre bearing on ``[low, high]``.
-
-    Row ``g`` is one post. The prior is uniform on the interval allowed by the hits and
-    misses; the likelihood of a candidate bearing compares the measured ranges with
-    those of the circle (centre distance profiled by least squares). With noisy ranges
-    this stays near the middle of the interval; with precise ranges it locks onto the
-    true centre. An empty interval (``low == high``) gives its point with zero variance.
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> a, b = rng.uniform(0.0, 1.0, 41) * 10.0 ** np.arange(-20, 21), rng.normal(size=41)
+    >>> bool(_dot(a, b) == np.einsum("k,k->", a, b))
+    True
     """
-    candidates = _RAMP * ((high - low) / (_BEARING_CANDIDATES - 1))[:, None]
-    candidates += low[:, None]
-    candidates[:, -1] = high
-    # Arrays are (G, beams, candidates): the candidates, the longest axis, vary fastest.
-    # sin and cos of (beam angle - candidate) come from the angle difference identities:
-    # (G, B) + (G, candidates) evaluations instead of full (G, B, candidates) ones (the
-    # bulk of the work otherwise); they agree with the direct ones to ~1e-16.
-    candidate_sin = np.sin(candidates)[:, None, :]
-    candidate_cos = np.cos(candidates)[:, None, :]
-    # The expressions of the docstring, evaluated in place into few (G, B, candidates)
-    # buffers: the same operations in the same order, fewer temporaries.
-    sine = hits.sin_3d * candidate_cos
-    sine -= hits.cos_3d * candidate_sin
-    cosine = hits.cos_3d * candidate_cos
-    cosine += hits.sin_3d * candidate_sin
-    ranges, weight, radius_sq = hits.ranges_3d, hits.weight_3d, radius * radius
-    work = np.multiply(ranges, sine)
-    work *= work
-    np.subtract(radius_sq, work, out=work)
-    np.maximum(work, 0.0, out=work)
-    np.sqrt(work, out=work)  # the half chord of each beam
-    # Centre distance for each candidate: the mean of the beams' individual estimates.
-    work += ranges * cosine
-    work *= weight
-    distance = work.sum(axis=1, keepdims=True)
-    distance /= hits.count_3d
-    np.multiply(distance, sine, out=work)
-    work *= work
-    np.subtract(radius_sq, work, out=work)
-    np.maximum(work, 0.0, out=work)
-    np.sqrt(work, out=work)
-    np.subtract(distance * cosine, work, out=work)  # the expected ranges
-    np.subtract(ranges, work, out=work)
-    work *= work
-    work *= weight
-    misfit = work.sum(axis=1)
-    misfit /= range_sigma**2
-    weights = np.exp(-0.5 * (misfit - misfit.min(axis=1, keepdims=True)))
-    weights /= weights.sum(axis=1, keepdims=True)
-    mean = np.einsum("gk,gk->g", weights, candidates)
-    variance = np.einsum("gk,gk->g", weights, (candidates - mean[:, None]) ** 2)
-    empty = ~(high > low)
-    if empty.any():
-        mean[empty], variance[empty] = 0.5 * (low[empty] + high[empty]), 0.0
-    return mean, variance
+    count = a.size
+    even, odd = 0.0, 0.0
+    i = 0
+    while count - i >= 8:
+        even = a[i] * b[i] + (a[i + 2] * b[i + 2] + (a[i + 4] * b[i + 4] + (
+            a[i + 6] * b[i + 6] + even)))
+        odd = a[i + 1] * b[i + 1] + (a[i + 3] * b[i + 3] + (a[i + 5] * b[i + 5] + (
+            a[i + 7] * b[i + 7] + odd)))
+        i += 8
+    while i < count:
+        even = a[i] * b[i] + even
+        if i + 1 < count:
+            odd = a[i + 1] * b[i + 1] + odd
+        i += 2
+    return even + odd
 
 
-def _centre_ranges(
-    hits: _Hits,
-    bearing: np.ndarray,
-    radius: float,
-    range_sigma: float,
-    bearing_variance: np.ndarray,
-    *,
-    variances: bool = True,
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """Return each centre distance, its variance and its covariance with the bearing.
+@numba.njit(cache=True)
+def _bearing_exponents(
+    ranges, angles, firsts, sizes, first_angle, last_angle, low_miss, high_miss, distance,
+    radius, radius_sq, range_variance,
+):  # pragma: no cover - compiled
+    """Return each post's feasible bearing interval, candidate grid and log-likelihoods.
 
-    With ``variances=False`` only the distance is computed (the other two are ``None``).
+    Post ``g`` covers beams ``firsts[g]`` to ``firsts[g] + sizes[g] - 1``; ``distance[g]``
+    is the current estimate of its centre distance. The interval holds the bearings
+    within the post's half-width of the hits whose silhouette ends before the
+    neighbouring beams that missed. On it, ``_BEARING_CANDIDATES`` candidates (as
+    ``numpy.linspace``); for each, the centre distance is profiled (the mean of the
+    beams' individual estimates) and the range misfit of the circle computed. Returns
+    ``lows, highs, candidates (G, K)`` and ``-misfit / 2`` shifted to a maximum of 0 (the
+    caller exponentiates: the posterior weights up to a factor).
+    """
+    count = firsts.size
+    lows, highs = np.empty(count), np.empty(count)
+    candidates = np.empty((count, _BEARING_CANDIDATES))
+    exponents = np.empty((count, _BEARING_CANDIDATES))
+    padded = 0
+    for g in range(count):
+        padded = max(padded, sizes[g])
+    beam_sin, beam_cos = np.empty(padded), np.empty(padded)
+    for g in range(count):
+        half_width = math.asin(min(1.0, radius / distance[g]))
+        low = last_angle[g] - half_width
+        high = first_angle[g] + half_width
+        # The neighbouring beams missed the post: its silhouette ends before them.
+        low = max(low, low_miss[g] + half_width)
+        high = min(high, high_miss[g] - half_width)
+        if low > high:  # noise made the bounds cross: fall back to the hits alone
+            low = min(last_angle[g] - half_width, first_angle[g] + half_width)
+            high = max(last_angle[g] - half_width, first_angle[g] + half_width)
+        lows[g], highs[g] = low, high
+        step = (high - low) / (_BEARING_CANDIDATES - 1)
+        for k in range(_BEARING_CANDIDATES - 1):
+            candidates[g, k] = k * step + low
+        candidates[g, _BEARING_CANDIDATES - 1] = high
+        first, size = firsts[g], sizes[g]
+        for b in range(size):
+            beam_sin[b], beam_cos[b] = math.sin(angles[first + b]), math.cos(angles[first + b])
+        for k in range(_BEARING_CANDIDATES):
+            candidate_sin = math.sin(candidates[g, k])
+            candidate_cos = math.cos(candidates[g, k])
+            # sin and cos of (beam angle - candidate) by the angle difference identities.
+            centre = 0.0
+            for b in range(size):
+                sine = beam_sin[b] * candidate_cos - beam_cos[b] * candidate_sin
+                cosine = beam_cos[b] * candidate_cos + beam_sin[b] * candidate_sin
+                across = ranges[first + b] * sine
+                centre += math.sqrt(max(radius_sq - across * across, 0.0)) + (
+                    ranges[first + b] * cosine)
+            centre /= size
+            misfit = 0.0
+            for b in range(size):
+                sine = beam_sin[b] * candidate_cos - beam_cos[b] * candidate_sin
+                cosine = beam_cos[b] * candidate_cos + beam_sin[b] * candidate_sin
+                across = centre * sine
+                expected = centre * cosine - math.sqrt(max(radius_sq - across * across, 0.0))
+                residual = ranges[first + b] - expected
+                misfit += residual * residual
+            exponents[g, k] = misfit / range_variance
+        best = exponents[g, 0]
+        for k in range(1, _BEARING_CANDIDATES):
+            best = min(best, exponents[g, k])
+        for k in range(_BEARING_CANDIDATES):
+            exponents[g, k] = -0.5 * (exponents[g, k] - best)
+    return lows, highs, candidates, exponents
 
-    Row ``g`` is one post seen in direction ``bearing[g]``. Each beam at angular offset
+
+@numba.njit(cache=True)
+def _centre_estimates(
+    ranges, angles, firsts, sizes, lows, highs, candidates, likelihoods, radius_sq,
+    floor_sq, range_variance, bearing_variance_floor, variances,
+):  # pragma: no cover - compiled
+    """Return each post's centre distance, its variances and the bearing's mean and variance.
+
+    The bearing: the posterior mean and variance over the candidates of
+    :func:`_bearing_exponents` (``likelihoods`` are their exponentials), plus
+    ``bearing_variance_floor`` (the beams' own angular noise); an empty interval gives
+    its point with zero posterior variance. The distance: each beam at angular offset
     ``delta`` from the centre direction, hitting at range ``r``, puts the centre at
-    ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``. Beams near the post's silhouette are
-    very sensitive to the range noise and to the bearing error (the square root's slope
-    diverges there), so the beams are averaged with inverse-variance weights from
-    first-order propagation of both.
+    ``r cos(delta) + sqrt(R^2 - r^2 sin^2(delta))``; beams near the silhouette are very
+    sensitive to range noise and bearing error (the root's slope diverges there), so the
+    beams are averaged with inverse-variance weights from first-order propagation of
+    both. The range noise is independent per beam; the bearing error is shared, so it
+    enters coherently and correlates the range with the bearing. Without ``variances``
+    only the distance and bearing are computed (the others are 0).
+
+    Returns ``distance, range_variance, cross, bearing, bearing_variance``, one per post.
+    Sums run in numpy's order over the posts' beams padded to the largest group.
     """
-    hit_ranges = hits.ranges
-    offsets = hits.angles - bearing[:, None]
-    sine, cosine = np.sin(offsets), np.cos(offsets)
-    across_sq = (hit_ranges * sine) ** 2
-    # Keep the square root away from 0, where the slopes diverge (grazing beams).
-    along = hit_ranges * cosine + np.sqrt(np.maximum(radius**2 - across_sq, 0.0))
-    depth = np.sqrt(np.maximum(radius**2 - across_sq, (_GRAZING_DEPTH * radius) ** 2))
-    slope_range = cosine - hit_ranges * sine**2 / depth
-    slope_bearing = hit_ranges * sine + hit_ranges**2 * sine * cosine / depth
-    variance = range_sigma**2 * slope_range**2 + bearing_variance[:, None] * slope_bearing**2
-    weights = hits.weight / np.maximum(variance, _MIN_RANGE_VARIANCE)
-    weights /= weights.sum(axis=1, keepdims=True)
-    if not variances:
-        return np.einsum("gb,gb->g", weights, along), None, None
-    # The range noise is independent per beam; the bearing error is shared by all beams,
-    # so it enters coherently and also correlates the range with the bearing estimate.
-    coupling = np.einsum("gb,gb->g", weights, slope_bearing)
-    range_variance = np.einsum("gb,gb->g", weights**2, slope_range**2) * range_sigma**2
-    range_variance += coupling**2 * bearing_variance
-    distance = np.einsum("gb,gb->g", weights, along)
-    return distance, range_variance, coupling * bearing_variance
+    count = firsts.size
+    padded = 0
+    for g in range(count):
+        padded = max(padded, sizes[g])
+    distance, range_variances = np.empty(count), np.zeros(count)
+    cross, bearing, bearing_variance = np.zeros(count), np.empty(count), np.empty(count)
+    weights = np.empty(_BEARING_CANDIDATES)
+    spread = np.empty(_BEARING_CANDIDATES)
+    along, slope_range, slope_bearing = np.zeros(padded), np.zeros(padded), np.zeros(padded)
+    beam_weights, squares_w, squares_r = np.zeros(padded), np.zeros(padded), np.zeros(padded)
+    for g in range(count):
+        total = _pairwise_sum(likelihoods[g])
+        for k in range(_BEARING_CANDIDATES):
+            weights[k] = likelihoods[g, k] / total
+        mean = _dot(weights, candidates[g])
+        for k in range(_BEARING_CANDIDATES):
+            offset = candidates[g, k] - mean
+            spread[k] = offset * offset
+        variance = _dot(weights, spread)
+        if not highs[g] > lows[g]:
+            mean, variance = 0.5 * (lows[g] + highs[g]), 0.0
+        variance = variance + bearing_variance_floor
+        bearing[g], bearing_variance[g] = mean, variance
+        # The beams past the group's size stay 0: padding that changes no sum but its order.
+        first, size = firsts[g], sizes[g]
+        for b in range(size, padded):
+            beam_weights[b], along[b], slope_bearing[b] = 0.0, 0.0, 0.0
+            squares_w[b], squares_r[b] = 0.0, 0.0
+        for b in range(size):
+            hit = ranges[first + b]
+            offset = angles[first + b] - mean
+            sine, cosine = math.sin(offset), math.cos(offset)
+            across_sq = (hit * sine) * (hit * sine)
+            along[b] = hit * cosine + math.sqrt(max(radius_sq - across_sq, 0.0))
+            # Keep the square root away from 0, where the slopes diverge (grazing beams).
+            depth = math.sqrt(max(radius_sq - across_sq, floor_sq))
+            slope_range[b] = cosine - hit * (sine * sine) / depth
+            slope_bearing[b] = hit * sine + hit * hit * sine * cosine / depth
+            beam_variance = range_variance * (slope_range[b] * slope_range[b]) + variance * (
+                slope_bearing[b] * slope_bearing[b])
+            beam_weights[b] = 1.0 / max(beam_variance, _MIN_RANGE_VARIANCE)
+        total = _pairwise_sum(beam_weights)
+        for b in range(size):
+            beam_weights[b] /= total
+        distance[g] = _dot(beam_weights, along)
+        if not variances:
+            continue
+        coupling = _dot(beam_weights, slope_bearing)
+        for b in range(size):
+            squares_w[b] = beam_weights[b] * beam_weights[b]
+            squares_r[b] = slope_range[b] * slope_range[b]
+        range_variances[g] = _dot(squares_w, squares_r) * range_variance + (
+            coupling * coupling) * variance
+        cross[g] = coupling * variance
+    return distance, range_variances, cross, bearing, bearing_variance
 
 
 def range_bearing_model(

@@ -31,6 +31,7 @@ import bisect
 import itertools
 import math
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import CubicHermiteSpline, CubicSpline
@@ -170,18 +171,23 @@ class SplinePath:
         self._coarse_points = self._evaluate(self._coarse_t)[0]
 
         # The same pieces as Python floats, for one-point queries (the follower's 50 Hz
-        # pose, curvature and projection): math on floats costs a fraction of numpy's
-        # per-call overhead on tiny arrays, and evaluates the very same expressions.
+        # pose and curvature): math on floats costs a fraction of numpy's per-call
+        # overhead on tiny arrays, and evaluates the very same expressions.
         self._spline_scalar = _ScalarCubic(self._breaks, self._coefficients)
         self._s_to_t_scalar = _ScalarCubic(self._s_to_t_breaks, self._s_to_t_coefficients)
-        self._t_to_s_scalar = _ScalarCubic(self._t_to_s_breaks, self._t_to_s_coefficients)
-        self._coarse_s_list = self._coarse_s.tolist()
-        self._coarse_t_list = self._coarse_t.tolist()
-        self._coarse_x = np.ascontiguousarray(self._coarse_points[:, 0])
-        self._coarse_y = np.ascontiguousarray(self._coarse_points[:, 1])
-        # The spline and its derivatives at every coarse sample, where the one-point
-        # projection's brackets mostly end: looked up instead of evaluated per query.
-        self._coarse_spline = [self._spline_scalar.evaluate(t) for t in self._coarse_t_list]
+        # What the compiled projection reads: every cubic as (4, pieces, columns).
+        self._projection_tables = (
+            np.ascontiguousarray(self._coarse_s),
+            np.ascontiguousarray(self._coarse_t),
+            np.ascontiguousarray(self._coarse_points[:, 0]),
+            np.ascontiguousarray(self._coarse_points[:, 1]),
+            np.ascontiguousarray(self._breaks),
+            np.ascontiguousarray(self._coefficients),
+            np.ascontiguousarray(self._s_to_t_breaks),
+            np.ascontiguousarray(self._s_to_t_coefficients[:, :, None]),
+            np.ascontiguousarray(self._t_to_s_breaks),
+            np.ascontiguousarray(self._t_to_s_coefficients[:, :, None]),
+        )
 
     @property
     def closed(self) -> bool:
@@ -383,27 +389,13 @@ class SplinePath:
             # min/max on a float clip like numpy.clip (nan stays nan) at a tenth of the cost.
             centre = min(max(float(s_hint), 0.0), self.length)
             lo, hi = max(0.0, centre - window), min(self.length, centre + window)
-        if points.shape == (2,):
-            x, y = float(points[0]), float(points[1])
-            if not (math.isfinite(x) and math.isfinite(y)):
-                raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
-            return self._project_one(x, y, lo, hi)
         points = points.reshape(-1, 2)
         if not np.all(np.isfinite(points)):
             raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
-        seeds, brackets_lo, brackets_hi = self._seed_projection(points, lo, hi)
-        basins, count = seeds.shape[1], points.shape[0]
-        t, position = self._refine_projection(
-            np.tile(points, (basins, 1)),
-            seeds.T.ravel(),
-            brackets_lo.T.ravel(),
-            brackets_hi.T.ravel(),
+        s = _project_points(
+            np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
+            float(lo), float(hi), *self._projection_tables,
         )
-        distance = np.sum((position - np.tile(points, (basins, 1))) ** 2, axis=1)
-        best = np.argmin(distance.reshape(basins, count), axis=0)
-        t_best = t.reshape(basins, count)[best, np.arange(count)]
-        s = _evaluate_cubic(self._t_to_s_breaks, self._t_to_s_coefficients, t_best)[0]
-        s = np.minimum(np.maximum(s, lo), hi)
         return float(s[0]) if single else s
 
     def _track(self, x: float, y: float, s_hint: float, window: float) -> float:
@@ -417,7 +409,8 @@ class SplinePath:
             raise ValueError(f"SplinePath.project: window must be > 0 m, got {window}")
         centre = min(max(s_hint, 0.0), self.length)
         lo, hi = max(0.0, centre - window), min(self.length, centre + window)
-        return self._project_one(x, y, lo, hi)
+        return float(_project_points(np.array([x]), np.array([y]), lo, hi,
+                                     *self._projection_tables)[0])
 
     def _pose_and_curvature(self, s: float) -> tuple[float, float, float, float]:
         """Return ``(*pose(s), curvature(s))`` for one finite float ``s``, one evaluation.
@@ -428,168 +421,6 @@ class SplinePath:
         # numpy's atan2, hypot and power, not math's: they round differently in the last bit.
         heading = float(np.arctan2(dy, dx))
         return x, y, heading, float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
-
-    def _project_one(self, x: float, y: float, lo: float, hi: float) -> float:
-        """Project one point: the same seeds, brackets and iterations as the array path.
-
-        A scalar transcription of ``_seed_projection`` + ``_refine_projection`` (the same
-        float operations in the same order, so the same result to the last bit) that
-        skips numpy's overhead on arrays of three rows: this runs at the control rate.
-        The spline at the coarse samples, where most brackets end, is looked up.
-        """
-        evaluate = self._spline_scalar.evaluate
-        # Seeds: the coarse samples strictly inside (lo, hi), framed by the window ends.
-        first = bisect.bisect_right(self._coarse_s_list, lo)
-        last = bisect.bisect_left(self._coarse_s_list, hi, lo=first)
-        t_lo, t_hi = self._t_one(lo), self._t_one(hi)
-        at_lo, at_hi = evaluate(t_lo), evaluate(t_hi)
-        candidates = [t_lo, *self._coarse_t_list[first:last], t_hi]
-        samples = [at_lo, *self._coarse_spline[first:last], at_hi]
-        count = len(candidates)
-        # Products, not ``** 2``: numpy squares by multiplying, C's pow() may round otherwise.
-        distance = np.empty(count)
-        distance[0] = _square_sum(x - at_lo[0], y - at_lo[1])
-        distance[-1] = _square_sum(x - at_hi[0], y - at_hi[1])
-        distance[1:-1] = (x - self._coarse_x[first:last]) ** 2 + (
-            y - self._coarse_y[first:last]
-        ) ** 2
-        # Local minima (ends compare with their one neighbour), as the array path finds them.
-        minimum = np.ones(count, dtype=bool)
-        minimum[1:] &= distance[1:] <= distance[:-1]
-        minimum[:-1] &= distance[:-1] <= distance[1:]
-        minima = np.flatnonzero(minimum).tolist()
-        distance_list = distance.tolist()
-        # A stable sort of the local minima by distance, then (as the array path's stable
-        # argsort ranks every other sample at +inf) the first non-minima in scan order.
-        basins = sorted(minima, key=distance_list.__getitem__)[:PROJECTION_BASINS]
-        wanted = min(PROJECTION_BASINS, count)
-        if len(basins) < wanted:
-            chosen = set(minima)
-            extra = (k for k in range(count) if k not in chosen)
-            basins += [next(extra) for _ in range(wanted - len(basins))]
-        seeds = [candidates[k] for k in basins]
-        lows = [candidates[max(k - 1, 0)] for k in basins]
-        highs = [candidates[min(k + 1, count - 1)] for k in basins]
-
-        # Refinement: safeguarded Newton on all basins in lock step (as the array path).
-        t_values, positions, active = [], [], []
-        for k, seed, low, high in zip(basins, seeds, lows, highs, strict=True):
-            # _distance_slope_one at the bracket ends, from the samples evaluated above.
-            px, py, dx, dy, _, _ = samples[max(k - 1, 0)]
-            slope_low, position_low = (px - x) * dx + (py - y) * dy, (px, py)
-            px, py, dx, dy, _, _ = samples[min(k + 1, count - 1)]
-            slope_high, position_high = (px - x) * dx + (py - y) * dy, (px, py)
-            at_low, at_high = slope_low >= 0.0, slope_high <= 0.0
-            active.append(not at_low and not at_high)
-            t_values.append(low if at_low else (high if at_high else seed))
-            positions.append(position_low if at_low else position_high)
-        steps = [0.0] * len(basins)
-        for _ in range(PROJECTION_ITERATIONS):
-            if not any(active):
-                break
-            for b, t in enumerate(t_values):
-                if not active[b]:
-                    continue
-                px, py, dx, dy, ddx, ddy = evaluate(t)
-                ox, oy = px - x, py - y
-                slope = ox * dx + oy * dy
-                second = (dx * dx + dy * dy) + (ox * ddx + oy * ddy)
-                positions[b] = (px, py)
-                if slope < 0.0:
-                    lows[b] = t
-                if slope > 0.0:
-                    highs[b] = t
-                low, high = lows[b], highs[b]
-                if second > 0.0 and low <= (newton := t - slope / second) <= high:
-                    steps[b] = newton - t
-                else:
-                    steps[b] = 0.5 * (low + high) - t
-            if all(abs(step) < PROJECTION_TOLERANCE for step in steps):
-                break
-            t_values = [t + step for t, step in zip(t_values, steps, strict=True)]
-        else:
-            positions = [evaluate(t)[:2] for t in t_values]
-        gaps = [_square_sum(px - x, py - y) for px, py in positions]
-        t_best = t_values[gaps.index(min(gaps))]
-        return min(max(self._t_to_s_scalar.value(t_best), lo), hi)
-
-    def _distance_slope_one(
-        self, t: float, x: float, y: float
-    ) -> tuple[float, float, tuple[float, float]]:
-        """Return ``_distance_slope`` for one ``t`` and one point ``(x, y)``."""
-        px, py, dx, dy, ddx, ddy = self._spline_scalar.evaluate(t)
-        ox, oy = px - x, py - y
-        return ox * dx + oy * dy, (dx * dx + dy * dy) + (ox * ddx + oy * ddy), (px, py)
-
-    def _seed_projection(
-        self, points: np.ndarray, lo: float, hi: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return the best coarse local minima of the distance in ``[lo, hi]`` and brackets.
-
-        All three outputs are spline parameters ``t``, shape ``(N, PROJECTION_BASINS)``.
-        Several basins are refined because a point near where the path bends back can be
-        nearly equidistant to two stretches, and the coarse samples alone may rank them
-        wrongly.
-        """
-        inside = (self._coarse_s > lo) & (self._coarse_s < hi)
-        end_t = self._t([lo, hi])
-        end_points = self._evaluate(end_t)[0]
-        candidates = np.concatenate([end_t[:1], self._coarse_t[inside], end_t[1:]])
-        candidate_points = np.concatenate(
-            [end_points[:1], self._coarse_points[inside], end_points[1:]]
-        )
-        distance = np.sum((points[:, None, :] - candidate_points[None, :, :]) ** 2, axis=-1)
-        padded = np.pad(distance, ((0, 0), (1, 1)), constant_values=np.inf)
-        local_minimum = (distance <= padded[:, :-2]) & (distance <= padded[:, 2:])
-        ranked = np.argsort(np.where(local_minimum, distance, np.inf), axis=1, kind="stable")
-        best = ranked[:, : min(PROJECTION_BASINS, candidates.size)]
-        seed = candidates[best]
-        bracket_lo = candidates[np.maximum(best - 1, 0)]
-        bracket_hi = candidates[np.minimum(best + 1, candidates.size - 1)]
-        return seed, bracket_lo, bracket_hi
-
-    def _distance_slope(
-        self, t: np.ndarray, points: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return ``f = d/dt |r(t) - q|^2 / 2``, ``df/dt`` and ``r(t)`` for each row."""
-        position, d1, d2 = self._evaluate(t)
-        offset = position - points
-        slope = np.sum(offset * d1, axis=1)
-        return slope, np.sum(d1 * d1, axis=1) + np.sum(offset * d2, axis=1), position
-
-    def _refine_projection(
-        self, points: np.ndarray, seed: np.ndarray, lo: np.ndarray, hi: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Minimise the distance over ``t`` in ``[lo, hi]`` by safeguarded Newton steps.
-
-        Returns the minimising ``t`` and the path points there.
-        """
-        both = np.concatenate([points, points])
-        ends, _, end_points = self._distance_slope(np.concatenate([lo, hi]), both)
-        slope_lo, slope_hi = ends[: lo.size], ends[lo.size :]
-        # Distance still growing at lo: lo is the constrained minimum (and hi likewise).
-        at_lo, at_hi = slope_lo >= 0.0, slope_hi <= 0.0
-        active = ~at_lo & ~at_hi
-        t, lo, hi = np.where(at_lo, lo, np.where(at_hi, hi, seed)), lo.copy(), hi.copy()
-        position = np.where(at_lo[:, None], end_points[: lo.size], end_points[lo.size :])
-        for _ in range(PROJECTION_ITERATIONS):
-            if not np.any(active):
-                break
-            slope, second, here = self._distance_slope(t, points)
-            position = np.where(active[:, None], here, position)
-            lo = np.where(active & (slope < 0.0), t, lo)
-            hi = np.where(active & (slope > 0.0), t, hi)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                newton = t - slope / second
-            # Inclusive bounds: a converged Newton step lands on the bracket end it set.
-            inside = (second > 0.0) & (newton >= lo) & (newton <= hi)
-            step = np.where(active, np.where(inside, newton, 0.5 * (lo + hi)) - t, 0.0)
-            if np.all(np.abs(step) < PROJECTION_TOLERANCE):
-                break
-            t = t + step
-        else:
-            position = self._evaluate(t)[0]
-        return t, position
 
 
 def _evaluate_cubic(
@@ -667,11 +498,6 @@ class _ScalarCubic:
         )
 
 
-def _square_sum(dx: float, dy: float) -> float:
-    """Return ``dx**2 + dy**2`` rounded as numpy rounds it (two products, one sum)."""
-    return dx * dx + dy * dy
-
-
 def _is_finite_float(s: object) -> bool:
     """Return whether ``s`` is one finite float (or int), the case of the scalar fast paths."""
     return isinstance(s, float | int) and not isinstance(s, bool) and math.isfinite(s)
@@ -686,3 +512,173 @@ def _table_nodes(knot_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pieces.append(np.linspace(t0, t1, count + 1)[1:])
         knot_rows.append(knot_rows[-1] + count)
     return np.concatenate([[knot_t[0]], *pieces]), np.array(knot_rows)
+
+
+@numba.njit(cache=True)
+def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
+    """Return value, first and second derivative of one piecewise cubic at ``x``.
+
+    ``coefficients`` is scipy's ``PPoly`` layout ``(4, pieces, columns)``; the piece is
+    found and clamped as :func:`_evaluate_cubic` finds it, and the same Horner
+    expressions are evaluated, so the results agree to the last bit.
+
+    Examples
+    --------
+    >>> breaks = np.array([0.0, 1.0, 2.0])
+    >>> coefficients = np.zeros((4, 2, 1))
+    >>> coefficients[2:, :, 0] = [[1.0, 1.0], [0.0, 1.0]]  # the line y = x
+    >>> _cubic_at(breaks, coefficients, 1.5, 0)
+    (1.5, 1.0, 0.0)
+    """
+    # The last break <= x among breaks[1:-1] (numpy.searchsorted, side "right", clamped
+    # to the first and last piece); a plain bisection compiles much faster.
+    piece, top = 0, breaks.size - 2
+    while piece < top:
+        middle = (piece + top + 1) // 2
+        if breaks[middle] <= x:
+            piece = middle
+        else:
+            top = middle - 1
+    h = x - breaks[piece]
+    c3, c2 = coefficients[0, piece, column], coefficients[1, piece, column]
+    c1, c0 = coefficients[2, piece, column], coefficients[3, piece, column]
+    value = ((c3 * h + c2) * h + c1) * h + c0
+    first = (3.0 * c3 * h + 2.0 * c2) * h + c1
+    second = 6.0 * c3 * h + 2.0 * c2
+    return value, first, second
+
+
+@numba.njit(cache=True)
+def _slope_at(breaks, coefficients, t, x, y):  # pragma: no cover - compiled
+    """Return ``d/dt |r(t) - q|^2 / 2``, its ``t``-derivative and ``r(t)`` for ``q = (x, y)``."""
+    px, dx, ddx = _cubic_at(breaks, coefficients, t, 0)
+    py, dy, ddy = _cubic_at(breaks, coefficients, t, 1)
+    ox, oy = px - x, py - y
+    return ox * dx + oy * dy, (dx * dx + dy * dy) + (ox * ddx + oy * ddy), px, py
+
+
+@numba.njit(cache=True)
+def _project_points(
+    xs, ys, lo, hi, coarse_s, coarse_t, coarse_x, coarse_y, breaks, coefficients,
+    s_to_t_breaks, s_to_t_coefficients, t_to_s_breaks, t_to_s_coefficients,
+):  # pragma: no cover - compiled
+    """Return the arc length in ``[lo, hi]`` of the path point closest to each ``(x, y)``.
+
+    Seeds: the coarse samples strictly inside ``(lo, hi)``, framed by the window ends;
+    the ``PROJECTION_BASINS`` best local minima of the distance among them (stably
+    ranked by distance, then other samples in order) are each refined by Newton steps
+    safeguarded by bisection inside the bracket of their neighbouring samples. All rows
+    (points x basins) step in lock step, as one array computation would, and the best
+    refined basin wins.
+
+    Examples
+    --------
+    >>> path = SplinePath([(0.0, 0.0), (2.0, 0.0)])
+    >>> s = path.project(np.array([[0.5, 0.3], [1.5, -0.2]]))
+    >>> s.round(6)
+    array([0.5, 1.5])
+    """
+    lo_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, lo, 0)[0]
+    hi_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, hi, 0)[0]
+    count = 2
+    for k in range(coarse_s.size):
+        if lo < coarse_s[k] < hi:
+            count += 1
+    candidates, sample_x, sample_y = np.empty(count), np.empty(count), np.empty(count)
+    candidates[0], candidates[count - 1] = lo_t, hi_t
+    row = 1
+    for k in range(coarse_s.size):
+        if lo < coarse_s[k] < hi:
+            candidates[row] = coarse_t[k]
+            sample_x[row], sample_y[row] = coarse_x[k], coarse_y[k]
+            row += 1
+    for k in (0, count - 1):
+        sample_x[k] = _cubic_at(breaks, coefficients, candidates[k], 0)[0]
+        sample_y[k] = _cubic_at(breaks, coefficients, candidates[k], 1)[0]
+    points, basins = xs.size, min(PROJECTION_BASINS, count)
+    rows = points * basins
+    t, low, high = np.empty(rows), np.empty(rows), np.empty(rows)
+    position_x, position_y = np.empty(rows), np.empty(rows)
+    active = np.empty(rows, dtype=np.bool_)
+    distance, key = np.empty(count), np.empty(count)
+    picked = np.zeros(count, dtype=np.bool_)
+    ranked = np.empty(basins, dtype=np.int64)
+    for p in range(points):
+        x, y = xs[p], ys[p]
+        for k in range(count):
+            dx, dy = x - sample_x[k], y - sample_y[k]
+            distance[k] = dx * dx + dy * dy
+        for k in range(count):
+            minimum = (k == 0 or distance[k] <= distance[k - 1]) and (
+                k == count - 1 or distance[k] <= distance[k + 1])
+            key[k] = distance[k] if minimum else np.inf
+        # The first `basins` of a stable sort by key: each pick is the earliest smallest
+        # key not picked yet.
+        for b in range(basins):
+            best = -1
+            for k in range(count):
+                if not picked[k] and (best < 0 or key[k] < key[best]):
+                    best = k
+            picked[best] = True
+            ranked[b] = best
+        for k in range(basins):
+            picked[ranked[k]] = False
+        for b in range(basins):
+            best = ranked[b]
+            r = b * points + p
+            low[r] = candidates[max(best - 1, 0)]
+            high[r] = candidates[min(best + 1, count - 1)]
+            # The bracket ends: where the distance still grows at the low end (or falls
+            # at the high end), that end is the constrained minimum.
+            slope_low, _, low_x, low_y = _slope_at(breaks, coefficients, low[r], x, y)
+            slope_high, _, high_x, high_y = _slope_at(breaks, coefficients, high[r], x, y)
+            at_low, at_high = slope_low >= 0.0, slope_high <= 0.0
+            active[r] = not at_low and not at_high
+            t[r] = low[r] if at_low else (high[r] if at_high else candidates[best])
+            position_x[r] = low_x if at_low else high_x
+            position_y[r] = low_y if at_low else high_y
+    step = np.zeros(rows)
+    converged = False
+    for _ in range(PROJECTION_ITERATIONS):
+        if not active.any():
+            converged = True
+            break
+        small = True
+        for r in range(rows):
+            if not active[r]:
+                continue
+            x, y = xs[r % points], ys[r % points]
+            slope, second, here_x, here_y = _slope_at(breaks, coefficients, t[r], x, y)
+            position_x[r], position_y[r] = here_x, here_y
+            if slope < 0.0:
+                low[r] = t[r]
+            if slope > 0.0:
+                high[r] = t[r]
+            # Newton inside the bracket, else bisection. Inclusive bounds: a converged
+            # Newton step lands on the bracket end it set.
+            step[r] = 0.5 * (low[r] + high[r]) - t[r]
+            if second > 0.0:
+                newton = t[r] - slope / second
+                if low[r] <= newton <= high[r]:
+                    step[r] = newton - t[r]
+            small = small and abs(step[r]) < PROJECTION_TOLERANCE
+        if small:
+            converged = True
+            break
+        for r in range(rows):
+            t[r] = t[r] + step[r]
+    result = np.empty(points)
+    for p in range(points):
+        best_gap, best_t = np.inf, 0.0
+        for b in range(basins):
+            r = b * points + p
+            if not converged:
+                position_x[r] = _cubic_at(breaks, coefficients, t[r], 0)[0]
+                position_y[r] = _cubic_at(breaks, coefficients, t[r], 1)[0]
+            dx, dy = position_x[r] - xs[p], position_y[r] - ys[p]
+            gap = dx * dx + dy * dy
+            if gap < best_gap or b == 0:
+                best_gap, best_t = gap, t[r]
+        s = _cubic_at(t_to_s_breaks, t_to_s_coefficients, best_t, 0)[0]
+        result[p] = min(max(s, lo), hi)
+    return result

@@ -1,10 +1,11 @@
 """The follower on the array code paths of ``SplinePath``: the reference for its fast paths.
 
 ``ChainedFormFollower`` queries the path one float at a time, which ``SplinePath`` answers
-with pure-Python transcriptions of its array code. ``ArrayPathFollower`` makes the same
-queries through the array code (one-row projections, 0-d poses and curvatures, numpy's
-``wrap_angle``), as the follower did before the fast paths existed. Tests require the
-two to command the same, bit for bit; ``benchmarks/test_bench_navigation.py`` times both.
+with pure-Python transcriptions of its array code for poses and curvatures (projections
+of one point or many run through one compiled kernel). ``ArrayPathFollower`` makes the
+same queries through the array code (one-row projections, 0-d poses and curvatures,
+numpy's ``wrap_angle``), as the follower did before the fast paths existed. Tests require
+the two to command the same, bit for bit; ``benchmarks/test_bench_navigation.py`` times both.
 """
 
 from __future__ import annotations

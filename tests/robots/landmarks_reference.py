@@ -1,7 +1,7 @@
 """The first, per-group implementation of landmark detection: the reference for the fast one.
 
-``robots.landmarks.detect_landmarks`` estimates every post of a scan in one batched numpy
-pass; this module keeps the original loop over groups (one numpy pass per post and
+``robots.landmarks.detect_landmarks`` estimates every post of a scan in two compiled
+passes per round; this module keeps the original loop over groups (one numpy pass per post and
 iteration), which is easier to read against the docstring of ``detect_landmarks``. The
 tests and ``benchmarks/test_bench_navigation.py`` compare the two.
 """

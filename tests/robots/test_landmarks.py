@@ -439,7 +439,8 @@ def test_min_beams_and_an_empty_bearing_interval_match_the_reference():
 
 
 def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_groups():
-    # Groups of 1 to 17 beams in one batch (padding), one with an empty interval.
+    # Groups of 1 to 17 beams in one batch (padding), one with an empty interval; the
+    # compiled passes fed directly (one numpy exp between them, as the detector does).
     rng = np.random.default_rng(9)
     sizes = [1, 3, 17, 6, 2]
     hit_ranges, hit_angles = [], []
@@ -447,37 +448,56 @@ def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_group
         centre = rng.uniform(-2.0, 2.0)
         hit_angles.append(centre + 0.008 * (np.arange(size) - (size - 1) / 2))
         hit_ranges.append(rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size))
-    lows = np.array([angles[-1] - 0.01 for angles in hit_angles])
-    highs = lows + rng.uniform(0.0, 0.02, len(sizes))
-    highs[3] = lows[3]  # an interval that collapsed to a point
-    mask = np.zeros((len(sizes), max(sizes)), dtype=bool)
-    ranges = np.ones(mask.shape)
-    angles = np.zeros(mask.shape)
-    for row, size in enumerate(sizes):
-        mask[row, :size] = True
-        ranges[row, :size], angles[row, :size] = hit_ranges[row], hit_angles[row]
-    hits = landmarks_module._Hits(ranges, angles, mask)
-    bearing, bearing_variance = landmarks_module._centre_bearings(
-        hits, lows, highs, POST_RADIUS, 0.012
+    # The groups side by side in one "scan" (their angles need not be monotonic here).
+    ranges, angles = np.concatenate(hit_ranges), np.concatenate(hit_angles)
+    # Read-only, as a Scan's arrays: the kernels' compiled version for scans serves.
+    ranges.flags.writeable = angles.flags.writeable = False
+    firsts = np.cumsum([0, *sizes[:-1]]).astype(np.int64)
+    counts = np.array(sizes, dtype=np.int64)
+    firsts_angle = np.array([group[0] for group in hit_angles])
+    lasts_angle = np.array([group[-1] for group in hit_angles])
+    # Misses far outside, so the interval is the hits' own ([last - w, first + w]) ...
+    distance = np.array([group.min() + POST_RADIUS for group in hit_ranges])
+    lows, highs, candidates, exponents = landmarks_module._bearing_exponents(
+        ranges, angles, firsts, counts, firsts_angle, lasts_angle, firsts_angle - 1.0,
+        lasts_angle + 1.0, distance, POST_RADIUS, POST_RADIUS**2, 0.012**2,
     )
-    distance, range_variance, cross = landmarks_module._centre_ranges(
-        hits, bearing, POST_RADIUS, 0.012, bearing_variance + 1e-6
+    # ... except group 3, whose interval collapses to a point.
+    lows[3] = highs[3]
+    candidates[3] = highs[3]
+    distance, range_variance, cross, bearing, bearing_variance = (
+        landmarks_module._centre_estimates(
+            ranges, angles, firsts, counts, lows, highs, candidates, np.exp(exponents),
+            POST_RADIUS**2, (0.05 * POST_RADIUS) ** 2, 0.012**2, 1e-6, True,
+        )
     )
     for row in range(len(sizes)):
         mean, variance = reference_centre_bearing(
             hit_ranges[row], hit_angles[row], lows[row], highs[row], POST_RADIUS, 0.012
         )
         assert bearing[row] == pytest.approx(mean, rel=0, abs=1e-12)
-        assert bearing_variance[row] == pytest.approx(variance, rel=1e-9, abs=1e-18)
+        assert bearing_variance[row] - 1e-6 == pytest.approx(variance, rel=1e-9, abs=1e-18)
         expected = reference_centre_range(
             hit_ranges[row],
             hit_angles[row] - bearing[row],
             POST_RADIUS,
             0.012,
-            bearing_variance[row] + 1e-6,
+            bearing_variance[row],
         )
         assert (distance[row], range_variance[row], cross[row]) == pytest.approx(
             expected, rel=1e-11
         )
-    assert bearing_variance[3] == 0.0
+    assert bearing_variance[3] == 1e-6
     assert bearing[3] == lows[3]
+
+
+@pytest.mark.parametrize("count", [1, 2, 7, 8, 9, 16, 17, 41, 45])
+def test_sums_follow_numpy_order_to_the_bit(count):
+    # The detector's sums reproduce numpy's (pairwise sum, einsum), so its estimates are
+    # bit for bit those of the former numpy implementation; numpy itself is the reference.
+    rng = np.random.default_rng(count)
+    for _ in range(200):
+        a = rng.uniform(0.0, 1.0, count) * 10.0 ** rng.integers(-6, 6, count)
+        b = rng.normal(size=count)
+        assert landmarks_module._pairwise_sum(a) == a.sum()
+        assert landmarks_module._dot(a, b) == np.einsum("gk,gk->g", a[None], b[None])[0]

@@ -288,3 +288,24 @@ def test_a_closed_route_is_driven_lap_after_lap_without_a_return_to_the_start():
     assert np.linalg.norm(true[boundary, :2] - true[0, :2]) < 0.2
     assert [lap.stops for lap in log.laps] == [1, 1]  # the worker, on every lap
     assert sum(lap.collisions for lap in log.laps) == 0
+
+
+def test_a_box_that_appears_against_the_robot_is_caught_as_a_collision_at_once(tiny_spec):
+    # The closed loop checks contacts after every physics step: a box teleported into the
+    # robot's front mid-lap is one collision, recorded on the very next step.
+    with Testbench(dataclasses.replace(tiny_spec, laps=1)) as bench:
+        bench.reset()
+        while bench.sim_time < 1.0:
+            bench.step()
+        x, y, heading = bench.true_pose
+        front = max(vertex[0] for vertex in bench.lead.robot.footprint)
+        reach = front + 0.15 - 0.02  # the 0.3 m crate overlaps the front by 2 cm
+        pose = (x + reach * np.cos(heading), y + reach * np.sin(heading), heading)
+        bench.add_box(BoxSpec("crate", (0.3, 0.3, 0.5), tuple(float(v) for v in pose)))
+        appeared = bench.sim_time
+        for _ in range(48):
+            bench.step()
+        events = bench.lead.contacts.events
+    assert len(events) == 1
+    assert events[0].name == "crate"
+    assert events[0].time == pytest.approx(appeared + bench.time_step)
