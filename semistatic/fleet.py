@@ -236,11 +236,12 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     restriction: two maps of one object often differ in extent, which the paper's vertex
     restriction reads as a distance of the overhang). Then:
 
-    - **newer wins**: an own polyline last seen before the sender entered takes the
-      received geometry and state (keeping its id; hits are the larger count). The
-      sender's map already holds the fleet's earlier view of that object, so averaging
-      the two would count that view twice and, for an object moved since, would place
-      it between where it was and where it is;
+    - **newer wins**: an own polyline last seen before the sender entered is replaced by
+      the received polylines associated with it, with their geometry and state (one of
+      them keeps its id; hits are the larger count). The sender's map already holds the
+      fleet's earlier view of that object, so averaging the two would count that view
+      twice and, for an object moved since, would place it between where it was and
+      where it is;
     - two sightings of one object in the same time (the receiver saw it after the sender
       entered) are merged (:func:`merge`, weighted by hit counts);
     - **seen in the pass**: a received polyline the sender associated during its pass
@@ -293,27 +294,43 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     since = message.since
     received = [_pass_summary(entry, since) for entry in received]
     own_latest = max((entry.last_seen for entry in own), default=-math.inf)
+    # Own polylines last seen before the sender entered are superseded: the received
+    # polylines associated with them take their place (a pairing may be one to many).
+    superseded = {j for _, j in pairs if own[j].last_seen < since}
+    concurrent = [(i, j) for i, j in pairs if j not in superseded]
+    replacing = {i for i, j in pairs if j in superseded} - {i for i, _ in concurrent}
     changed = 0
-    matched_own: set[int] = set()
-    matched_received: set[int] = set()
-    for i, j in pairs:
+    for i, j in concurrent:
         theirs, mine = received[i], local_map[own[j].id]
-        matched_own.add(j)
-        matched_received.add(i)
-        hits = max(mine.hits, theirs.hits)
-        first_seen = min(mine.first_seen, theirs.first_seen)
-        if mine.last_seen < since:
-            merged = dataclasses.replace(theirs, id=mine.id, hits=hits, first_seen=first_seen)
-        else:
-            newer = theirs if theirs.last_seen > mine.last_seen else mine
-            geometry = merge(mine.polyline, theirs.polyline, params.epsilon,
-                             map_weight=mine.hits / max(theirs.hits, 1))
-            # Two vehicles saw it: confirmed, unless the later sighting found it missing.
-            status = "blank" if newer.status == "blank" else "confirmed"
-            merged = MapPolyline(mine.id, geometry, status, hits, newer.misses, first_seen,
-                                 max(mine.last_seen, theirs.last_seen))
-        local_map.restore(merged, replace=True)
+        newer = theirs if theirs.last_seen > mine.last_seen else mine
+        geometry = merge(mine.polyline, theirs.polyline, params.epsilon,
+                         map_weight=mine.hits / max(theirs.hits, 1))
+        # Two vehicles saw it: confirmed, unless the later sighting found it missing.
+        status = "blank" if newer.status == "blank" else "confirmed"
+        local_map.restore(
+            MapPolyline(mine.id, geometry, status, max(mine.hits, theirs.hits), newer.misses,
+                        min(mine.first_seen, theirs.first_seen),
+                        max(mine.last_seen, theirs.last_seen)),
+            replace=True,
+        )
         changed += 1
+    free_ids = set()
+    for j in sorted(superseded):
+        local_map.remove(own[j].id)
+        free_ids.add(own[j].id)
+        changed += 1
+    for i in sorted(replacing):
+        mates = [own[j] for k, j in pairs if k == i and j in superseded]
+        reused = next((mate.id for mate in mates if mate.id in free_ids), None)
+        free_ids.discard(reused)
+        theirs = received[i]
+        local_map.restore(dataclasses.replace(
+            theirs, id=local_map.next_id if reused is None else reused,
+            hits=max(theirs.hits, *(mate.hits for mate in mates)),
+            first_seen=min(theirs.first_seen, *(mate.first_seen for mate in mates))))
+        changed += reused is None
+    matched_own = {j for _, j in pairs}
+    matched_received = {i for i, _ in pairs}
     for j, entry in enumerate(own):
         if j not in matched_own and entry.last_seen < since:
             local_map.remove(entry.id)

@@ -173,3 +173,17 @@ def test_merge_of_an_identical_map_changes_no_geometry():
     assert sorted(mine.entries) == sorted(before)
     for map_id, points in before.items():
         np.testing.assert_allclose(mine[map_id].polyline.points, points, atol=1e-5)
+
+
+def test_every_received_piece_replaces_the_older_polyline_it_pairs_with():
+    """A wall we saw whole, seen by the sender in two pieces (a pallet before it since)."""
+    mine = LocalMap()
+    wall = mine.add([[0.0, 2.0], [10.0, 2.0]], stamp=1.0)
+    pieces = ([[0.0, 2.0], [4.0, 2.0]], [[6.0, 2.0], [10.0, 2.0]])
+    theirs = tuple(MapPolyline(k, Polyline(piece), "confirmed", 30, 0, 21.0, 24.0)
+                   for k, piece in enumerate(pieces))
+    merge_segment_map(mine, SegmentMessage(0, 1, 26.0, 20.0, theirs))
+    held = sorted(entry.polyline.points.tolist() for entry in mine)
+    assert held == sorted(pieces)
+    assert wall in mine                       # one piece carries the wall's id on
+    assert all(entry.status == "confirmed" and entry.first_seen == 1.0 for entry in mine)
