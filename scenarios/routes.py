@@ -1,11 +1,13 @@
-"""Which vehicles a scenario drives, and each one's route: the world's path from its start.
+"""Which vehicles a scenario drives, and each one's route through the world's path segments.
 
 A scenario without ``[[vehicles]]`` drives one vehicle, the scenario's ``robot``, from the
 path start (:func:`fleet_vehicles`). A vehicle that starts at another segment drives the
 same closed loop with its knots and segments rotated to begin there
 (:func:`route_from`): the periodic spline through the same knots in the same cyclic
-order is the same curve, so every vehicle's segments keep their names, their frames and
-their safety areas (to rounding) and the vehicles can share segment maps by name.
+order is the same curve. A vehicle's ``route`` (segment names in driving order) may also
+be a part of the path, an open route (:func:`vehicle_route`). Whatever its route, a
+vehicle keeps each segment's map in the fleet's frame of that segment
+(:func:`fleet_frames`), so the vehicles share segment maps by name.
 
 Examples
 --------
@@ -17,14 +19,24 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 from scenarios.layout import robot_preset
+from scenarios.segments import PathSegment
 from scenarios.spec import ScenarioSpec, VehicleSpec
 from semistatic.errors import SpecError
 from semistatic.validation import did_you_mean
 from worlds.spec import WorldSpec
 
-__all__ = ["SINGLE_VEHICLE", "check_vehicles", "fleet_vehicles", "route_from"]
+__all__ = [
+    "SINGLE_VEHICLE",
+    "check_route",
+    "check_vehicles",
+    "fleet_frames",
+    "fleet_vehicles",
+    "route_from",
+    "vehicle_route",
+]
 
 SINGLE_VEHICLE = "robot"
 """Name of the one vehicle of a scenario without ``[[vehicles]]``."""
@@ -80,6 +92,106 @@ def route_from(world: WorldSpec, start_segment: str) -> WorldSpec:
                                                                segments=tuple(segments)))
 
 
+def check_route(world: WorldSpec, route: Sequence[str]) -> tuple[int, str] | None:
+    """Return ``(index, what is wrong)`` for the first bad name of ``route``, or ``None``.
+
+    A route names the world's path segments in driving order, each one the segment that
+    follows the one before on the path (wrapping round a closed path), none twice.
+
+    Examples
+    --------
+    >>> from worlds.load import load_world
+    >>> world = load_world("warehouse")
+    >>> check_route(world, ["north_west", "turn_northwest"]) is None
+    True
+    >>> check_route(world, ["south_west", "turn_southeast"])   # skips south_east
+    (1, "segment 'turn_southeast' does not follow 'south_west' (next on the path: 'south_east')")
+    """
+    names = [segment.name for segment in world.path.segments]
+    for index, name in enumerate(route):
+        if name not in names:
+            return index, (f"no segment {name!r} in world {world.name!r}"
+                           f"{did_you_mean(name, names)}; segments: {', '.join(names)}")
+        if name in route[:index]:
+            return index, f"segment {name!r} is on the route twice"
+        if index == 0:
+            continue
+        previous = names.index(route[index - 1])
+        if previous + 1 == len(names) and not world.path.closed:
+            return index, (f"the path of world {world.name!r} is open: no segment follows "
+                           f"{route[index - 1]!r}")
+        following = names[(previous + 1) % len(names)]
+        if name != following:
+            return index, (f"segment {name!r} does not follow {route[index - 1]!r} "
+                           f"(next on the path: {following!r})")
+    return None
+
+
+def vehicle_route(world: WorldSpec, vehicle: VehicleSpec) -> WorldSpec:
+    """Return ``world`` with the path ``vehicle`` drives (its ``route`` or ``start_segment``).
+
+    A route of every segment of a closed path is the loop from its first segment; a
+    shorter one is an open path through those segments' knots (the vehicle is carried
+    back to its start after each lap). The route must pass :func:`check_route`.
+
+    Examples
+    --------
+    >>> from worlds.load import load_world
+    >>> world = load_world("warehouse")
+    >>> part = vehicle_route(world, VehicleSpec("a", route=("north_east", "north_west")))
+    >>> [s.name for s in part.path.segments], part.path.closed, part.path.knots[0]
+    (['north_east', 'north_west'], False, (33.0, 22.2))
+    """
+    if not vehicle.route:
+        return route_from(world, vehicle.start_segment)
+    problem = check_route(world, vehicle.route)
+    if problem is not None:
+        raise ValueError(f"route[{problem[0]}]: {problem[1]}")
+    path = world.path
+    base = route_from(world, vehicle.route[0]) if path.closed else world
+    names = [segment.name for segment in base.path.segments]
+    first = names.index(vehicle.route[0])
+    chosen = base.path.segments[first:first + len(vehicle.route)]
+    if path.closed and len(chosen) == len(names):
+        return base
+    offset = chosen[0].start_knot
+    knots = base.path.knots[offset:chosen[-1].end_knot + 1]
+    segments = tuple(
+        dataclasses.replace(segment, start_knot=segment.start_knot - offset,
+                            end_knot=segment.end_knot - offset)
+        for segment in chosen
+    )
+    return dataclasses.replace(world, path=dataclasses.replace(
+        base.path, knots=knots, segments=segments, closed=False))
+
+
+def fleet_frames(own: Sequence[PathSegment],
+                 fleet: Sequence[PathSegment]) -> tuple[PathSegment, ...]:
+    """Return a vehicle's segments with the fleet's frames and safety areas, by name.
+
+    A vehicle's own spans along its route (``start_s``, ``end_s``, ``index``) stay; the
+    local map frame (``origin``) and safety areas are the world path's, so a segment map
+    means the same to every vehicle whichever route (or rotated loop) it drives.
+
+    Examples
+    --------
+    >>> from worlds.load import load_world
+    >>> from scenarios.segments import path_segments
+    >>> world = load_world("warehouse")
+    >>> fleet = path_segments(world)
+    >>> own = path_segments(route_from(world, "east"))
+    >>> mine = fleet_frames(own, fleet)
+    >>> mine[0].name, mine[0].start_s, mine[0].origin is fleet[3].origin
+    ('east', 0.0, True)
+    """
+    by_name = {segment.name: segment for segment in fleet}
+    return tuple(
+        dataclasses.replace(by_name[segment.name], index=segment.index,
+                            start_s=segment.start_s, end_s=segment.end_s)
+        for segment in own
+    )
+
+
 def check_vehicles(spec: ScenarioSpec, world: WorldSpec) -> None:
     """Raise :class:`SpecError` if a vehicle's preset or start segment does not exist.
 
@@ -105,13 +217,13 @@ def check_vehicles(spec: ScenarioSpec, world: WorldSpec) -> None:
                 robot_preset(vehicle.robot, file=spec.source)
             except SpecError as error:
                 raise SpecError(spec.source, f"{where}.robot", error.message) from None
+        problem = check_route(world, vehicle.route)
+        if problem is not None:
+            raise SpecError(spec.source, f"{where}.route[{problem[0]}]", problem[1])
         start = vehicle.start_segment
-        if start and start not in names:
-            raise SpecError(
-                spec.source, f"{where}.start_segment",
-                f"no segment {start!r} in world {world.name!r}{did_you_mean(start, names)}; "
-                f"segments: {', '.join(names)}",
-            )
+        problem = check_route(world, [start] if start else [])
+        if problem is not None:
+            raise SpecError(spec.source, f"{where}.start_segment", problem[1])
         if start and start != names[0] and not world.path.closed:
             raise SpecError(
                 spec.source, f"{where}.start_segment",

@@ -36,6 +36,9 @@ MAX_SEED = 2**63 - 1
 MAX_LAP_TIMEOUT = 3600.0
 """Longest lap timeout (s): a lap of a bundled path takes 25-60 s."""
 
+MAX_START_TIME = 3600.0
+"""Latest start of a fleet vehicle (s): an hour of the others driving alone."""
+
 POLICIES = ("conservative", "adaptive")
 BOX_ACTIONS = ("move", "add", "remove")
 
@@ -170,10 +173,11 @@ class BoxMove:
 class VehicleSpec:
     """One vehicle of a fleet (array of tables ``[[vehicles]]``).
 
-    Every vehicle drives the world's path (its route) with its own sensors, encoders,
-    EKF, follower, safety supervisor, local maps and random streams. Its laps start and
-    end where it starts: at the start of segment ``start_segment`` (a start offset along
-    the route, so a closed route can carry vehicles spread round the loop).
+    Every vehicle drives a route through the world's path segments with its own sensors,
+    encoders, EKF, follower, safety supervisor, local maps and random streams. Its laps
+    start and end where it starts: at the start of segment ``start_segment`` (a start
+    offset along the route, so a closed route can carry vehicles spread round the loop)
+    or of the first segment of ``route``. It stands there until ``start_time``.
 
     Parameters
     ----------
@@ -183,11 +187,26 @@ class VehicleSpec:
         Robot preset (default: the scenario's ``robot``).
     start_segment
         Name of the path segment at whose start the vehicle starts (default: the first).
+    route
+        Names of the world's path segments the vehicle drives, in driving order, each
+        starting where the one before ends (default: the whole path). Every segment of a
+        closed path makes a closed loop driven lap after lap; fewer make an open route,
+        after which the vehicle is carried back to its start like on an open path. Give
+        ``route`` or ``start_segment``, not both.
+    start_time
+        Simulated time (s) until which the vehicle stands at its start; its first lap
+        starts then.
 
     Examples
     --------
     >>> VehicleSpec("lgv2", start_segment="north_east").robot
     ''
+    >>> VehicleSpec("lgv3", route=("east", "north_east"), start_time=20.0).route
+    ('east', 'north_east')
+    >>> VehicleSpec("lgv3", start_time=-1.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: start_time: ...
     >>> VehicleSpec("lgv 2")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
@@ -197,9 +216,15 @@ class VehicleSpec:
     name: str = field(metadata=safe_name())
     robot: str = ""
     start_segment: str = ""
+    route: tuple[str, ...] = ()
+    start_time: float = field(default=0.0, metadata=bounds(ge=0.0, le=MAX_START_TIME))
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.route and self.start_segment:
+            raise SpecError(MEMORY, "start_segment",
+                            "give route (its first segment is the start) or start_segment, "
+                            "not both")
 
 
 @dataclass(frozen=True)

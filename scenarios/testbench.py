@@ -51,7 +51,7 @@ from scenarios.load import load_scenario
 from scenarios.observers import GroundTruthScoring, GuiView, Table1Reference, hook_table
 from scenarios.policies import FieldPolicy
 from scenarios.records import LapLog, RunLog, Schedule, combine_logs
-from scenarios.routes import fleet_vehicles, route_from
+from scenarios.routes import fleet_vehicles, vehicle_route
 from scenarios.segments import PathSegment, path_segments
 from scenarios.sharing import SegmentPublisher
 from scenarios.spec import ScenarioSpec
@@ -194,8 +194,8 @@ class Testbench:
             robot = self._robot_spec if index == 0 and not spec.vehicles else \
                 robot_preset(vehicle.robot, file=spec.source)
             self.fleet.append(Vehicle(self, index, vehicle.name, robot,
-                                      route_from(base_world, vehicle.start_segment),
-                                      store=self.store))
+                                      vehicle_route(base_world, vehicle),
+                                      store=self.store, start_time=vehicle.start_time))
         self.vehicles: Mapping[str, Vehicle] = MappingProxyType(
             {vehicle.name: vehicle for vehicle in self.fleet})
         if self.fleet_size == 1:

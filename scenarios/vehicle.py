@@ -50,6 +50,7 @@ from robots.safety import FieldState, SafetyPolicy, SafetySupervisor, scan_point
 from scenarios.observers import hook_table
 from scenarios.policies import FieldView, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord
+from scenarios.routes import fleet_frames
 from scenarios.segments import PathSegment, path_segments, segment_index
 from semistatic.adaptation import minimum_protective_field
 from semistatic.fleet import FleetMapStore, merge_segment_map
@@ -108,6 +109,8 @@ class Vehicle:
     store
         The fleet map store a vehicle fetches segment maps from when it enters a segment
         (``None``: no fetching).
+    start_time
+        Simulated time (s) until which the vehicle stands at its start (lap 1 starts then).
 
     Attributes
     ----------
@@ -118,8 +121,10 @@ class Vehicle:
     """
 
     def __init__(self, bench, index: int, name: str, robot: UGVSpec, route: WorldSpec, *,
-                 store: FleetMapStore | None = None) -> None:
+                 store: FleetMapStore | None = None, start_time: float = 0.0) -> None:
         self.bench = bench
+        self.start_time = float(start_time)
+        self.waiting = self.start_time > 0.0
         self.index = int(index)
         self.name = name
         self.robot = robot
@@ -130,7 +135,9 @@ class Vehicle:
         sim, world = bench.sim, bench.world
         path = build_spline(route.path)
         self.path = path
-        self.segments: tuple[PathSegment, ...] = path_segments(route, path)
+        # The fleet's segment frames, whatever part of the loop this vehicle drives.
+        self.segments: tuple[PathSegment, ...] = fleet_frames(path_segments(route, path),
+                                                              bench.segments)
         self.log = RunLog(spec=spec, world=route, robot=robot, segments=self.segments)
         self.start = path.pose(0.0)
         self.body = SimUGV(sim, robot, self.start)
@@ -313,6 +320,10 @@ class Vehicle:
         """Run the vehicle's sensors, safety fields, mapper and controller due this tick."""
         if self.done:
             return
+        if self.waiting:
+            if self.bench.sim_time < self.start_time:
+                return  # standing still at the start: nothing senses, nothing moves
+            self._depart()
         if control_due or localization_due or safety_due:
             self._predict()
         scan = None
@@ -333,7 +344,7 @@ class Vehicle:
 
     def lap_over(self) -> bool:
         """Return whether the current lap reached its end or timed out."""
-        if self.done:
+        if self.done or self.waiting:
             return False
         elapsed = self.bench.sim_time - self.lap_log.start_time
         return self.follower.done or elapsed > self.log.spec.lap_timeout
@@ -371,6 +382,12 @@ class Vehicle:
         # Like the EKF, odometry restarts from the triangulated pose: the robot was carried.
         self.odom_pose = self.ekf.pose.copy()
         self._start_lap_hooks(lap)
+
+    def _depart(self) -> None:
+        """End the wait at the start: lap 1 starts now, from the pose localised at reset."""
+        self.waiting = False
+        self.lap_log.start_time = self.bench.sim.sim_time
+        self.lap_log.first_tick = len(self.log.stamps)
 
     def _continue_loop(self, lap: int) -> None:
         """Start lap ``lap`` of a closed route where the last one ended, at speed.

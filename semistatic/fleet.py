@@ -26,7 +26,8 @@ metres), where float32 keeps 4 um or better. The same area as a ROS
 Conflict rule: the store keeps, per segment, the latest publication (by stamp; on equal
 stamps the lower sender index). Every vehicle merges the segment's stored map into its own
 when it enters the segment, before it publishes on leaving, so the latest publication
-already carries what the earlier ones knew.
+already carries what the earlier ones knew, and in a merge the newer sighting of an
+object wins over the older one (:func:`merge_segment_map`).
 
 Examples
 --------
@@ -227,16 +228,33 @@ def occupancy_grid_bytes(area: shapely.Geometry, resolution: float = GRID_RESOLU
 def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     """Merge a fetched segment map into a vehicle's own map of that segment.
 
-    Rules: received polylines are associated with the own ones (:func:`associate`, the
-    mapper's gate, viewed from the segment's safety-area centre, always with the
-    ``"projection"`` restriction: two maps of one object often differ in extent, which the
-    paper's vertex restriction reads as a distance of the overhang); an
-    associated pair is merged (:func:`merge`, weighted by hit counts), takes the misses
-    of whichever was seen last and is ``confirmed`` (seen by two vehicles: more than once)
-    unless that last sighting marked it ``blank``. A received polyline with no partner
-    joins the map (unless it is blank). An own polyline with no partner that was last seen
-    before the sender entered the segment is dropped: the sender drove the segment since
-    and its life cycle no longer holds it.
+    The message is the sender's view of the segment after a whole pass through it (it
+    entered at ``message.since``, having merged the fleet's map of the segment then), so
+    for everything it saw in that pass it is newer than what the receiver saw before.
+    Received polylines are associated with the own ones (:func:`associate`, the mapper's
+    gate, viewed from the segment's safety-area centre, always with the ``"projection"``
+    restriction: two maps of one object often differ in extent, which the paper's vertex
+    restriction reads as a distance of the overhang). Then:
+
+    - **newer wins**: an own polyline last seen before the sender entered is replaced by
+      the received polylines associated with it, with their geometry and state (one of
+      them keeps its id; hits are the larger count). The sender's map already holds the
+      fleet's earlier view of that object, so averaging the two would count that view
+      twice and, for an object moved since, would place it between where it was and
+      where it is;
+    - two sightings of one object in the same time (the receiver saw it after the sender
+      entered) are merged (:func:`merge`, weighted by hit counts);
+    - **seen in the pass**: a received polyline the sender associated during its pass
+      more than once (``last_seen >= since``, ``hits > 1``) is ``confirmed`` for the
+      receiver, whatever the sender's last scan said: a box passed and seen from behind
+      at a grazing angle is often read as missing by the last scans (``blank``, fewer
+      misses than the mapper's ``miss_limit``); what was truly taken away is missed from
+      the start of the pass and never seen in it;
+    - **stale**: an own polyline with no partner, last seen before the sender entered,
+      is dropped (the sender drove the segment since and its life cycle no longer holds
+      it). A received polyline with no partner joins unless it is ``blank`` or the
+      receiver's own view of the segment is newer than the sender's last sighting of it
+      (the receiver drove past later and its life cycle did not keep it).
 
     Returns the number of polylines changed, added or dropped.
 
@@ -253,7 +271,7 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     >>> merge_segment_map(mine, SegmentMessage(0, 1, 10.0, 8.0, tuple(theirs)))
     2
     >>> [(entry.id, entry.polyline.points.round(2).tolist()) for entry in mine]
-    [(0, [[2.01, -1.0], [2.02, 1.5]])]
+    [(0, [[2.02, -1.0], [2.02, 1.5]])]
     """
     params = local_map.params
     own = list(local_map)
@@ -273,34 +291,63 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
             for i, j in associate(scan_lines, [entry.polyline for entry in own], params.gate,
                                   viewpoint=viewpoint, mode="projection")
         ]
+    since = message.since
+    received = [_pass_summary(entry, since) for entry in received]
+    own_latest = max((entry.last_seen for entry in own), default=-math.inf)
+    # Own polylines last seen before the sender entered are superseded: the received
+    # polylines associated with them take their place (a pairing may be one to many).
+    superseded = {j for _, j in pairs if own[j].last_seen < since}
+    concurrent = [(i, j) for i, j in pairs if j not in superseded]
+    replacing = {i for i, j in pairs if j in superseded} - {i for i, _ in concurrent}
     changed = 0
-    matched_own: set[int] = set()
-    matched_received: set[int] = set()
-    for i, j in pairs:
+    for i, j in concurrent:
         theirs, mine = received[i], local_map[own[j].id]
-        matched_own.add(j)
-        matched_received.add(i)
         newer = theirs if theirs.last_seen > mine.last_seen else mine
         geometry = merge(mine.polyline, theirs.polyline, params.epsilon,
                          map_weight=mine.hits / max(theirs.hits, 1))
         # Two vehicles saw it: confirmed, unless the later sighting found it missing.
         status = "blank" if newer.status == "blank" else "confirmed"
         local_map.restore(
-            MapPolyline(mine.id, geometry, status, max(mine.hits, theirs.hits),
-                        newer.misses, min(mine.first_seen, theirs.first_seen),
+            MapPolyline(mine.id, geometry, status, max(mine.hits, theirs.hits), newer.misses,
+                        min(mine.first_seen, theirs.first_seen),
                         max(mine.last_seen, theirs.last_seen)),
             replace=True,
         )
         changed += 1
+    free_ids = set()
+    for j in sorted(superseded):
+        local_map.remove(own[j].id)
+        free_ids.add(own[j].id)
+        changed += 1
+    for i in sorted(replacing):
+        mates = [own[j] for k, j in pairs if k == i and j in superseded]
+        reused = next((mate.id for mate in mates if mate.id in free_ids), None)
+        free_ids.discard(reused)
+        theirs = received[i]
+        local_map.restore(dataclasses.replace(
+            theirs, id=local_map.next_id if reused is None else reused,
+            hits=max(theirs.hits, *(mate.hits for mate in mates)),
+            first_seen=min(theirs.first_seen, *(mate.first_seen for mate in mates))))
+        changed += reused is None
+    matched_own = {j for _, j in pairs}
+    matched_received = {i for i, _ in pairs}
     for j, entry in enumerate(own):
-        if j not in matched_own and entry.last_seen < message.since:
+        if j not in matched_own and entry.last_seen < since:
             local_map.remove(entry.id)
             changed += 1
     for i, entry in enumerate(received):
-        if i not in matched_received and entry.status != "blank":
+        if i not in matched_received and entry.status != "blank" \
+                and entry.last_seen > own_latest:
             local_map.restore(dataclasses.replace(entry, id=local_map.next_id))
             changed += 1
     return changed
+
+
+def _pass_summary(entry: MapPolyline, since: float) -> MapPolyline:
+    """Return ``entry`` confirmed if its sender saw it more than once after ``since``."""
+    if entry.last_seen >= since and entry.hits > 1 and entry.status != "confirmed":
+        return dataclasses.replace(entry, status="confirmed")
+    return entry
 
 
 def _bearing(polyline: Polyline, viewpoint: tuple[float, float, float]) -> float:

@@ -113,3 +113,69 @@ def test_a_fleet_keeps_vehicles_out_of_its_maps_and_shares_them():
     assert log.sharing["messages"] == sum(v.sharing["messages"] for v in log.vehicles.values())
     assert log.sharing["grid_bytes"] >= 10 * log.sharing["bytes"]
     assert len(log.laps) == 6
+
+
+@pytest.mark.parametrize(("route", "problem"), [
+    ('["south_west", "turn_southeast"]',   # skips south_east
+     "route[1]: segment 'turn_southeast' does not follow 'south_west' (next on the path: "
+     "'south_east')"),
+    ('["south_east", "south_west"]',       # reversed
+     "route[1]: segment 'south_west' does not follow 'south_east' (next on the path: "
+     "'turn_southeast')"),
+    ('["south_west", "sout_east"]', "route[1]: no segment 'sout_east' in world 'warehouse'"),
+    ('["east", "turn_northeast", "east"]', "route[2]: segment 'east' is on the route twice"),
+])
+def test_a_route_that_does_not_follow_the_path_is_refused(tmp_path, route, problem):
+    path = tmp_path / "fleet.toml"
+    path.write_text(f'world = "warehouse"\nrobot = "lgv"\n[[vehicles]]\nname = "a"\n'
+                    f'[[vehicles]]\nname = "b"\nroute = {route}\n')
+    with pytest.raises(SpecError) as error:
+        load_scenario(path)
+    assert str(error.value).startswith(f"{path}: vehicles[1].{problem}")
+
+
+def test_route_and_start_time_are_checked(tmp_path):
+    path = tmp_path / "fleet.toml"
+    path.write_text('world = "warehouse"\n[[vehicles]]\nname = "a"\nroute = ["east"]\n'
+                    'start_segment = "east"\n')
+    with pytest.raises(SpecError, match=r"vehicles\[0\]\.start_segment: give route .* not both"):
+        load_scenario(path)
+    path.write_text('world = "warehouse"\n[[vehicles]]\nname = "a"\nstart_time = -2.0\n')
+    with pytest.raises(SpecError, match=r"vehicles\[0\]\.start_time: must be >= 0"):
+        load_scenario(path)
+
+
+def test_a_vehicle_drives_its_sub_route_and_waits_for_its_start_time():
+    spec = load_scenario("warehouse", overrides=["laps=1", "sharing=false"])
+    spec = dataclasses.replace(spec, people=(), moves=(), vehicles=(
+        VehicleSpec("lgv1", route=("turn_southwest", "south_start")),
+        VehicleSpec("lgv2", route=("north_west",), start_time=4.0),
+    ))
+    world = scenario_world(spec)
+    loop = shapely.LineString(build_spline(world.path).pose(np.linspace(0.0, 96.9, 2000))[:, :2])
+    with Testbench(spec) as bench:
+        bench.reset()
+        lgv1, lgv2 = bench.vehicles["lgv1"], bench.vehicles["lgv2"]
+        start = lgv2.true_pose.copy()
+        moved_at = None
+        while not bench.done:
+            bench.step()
+            if moved_at is None and np.hypot(*(lgv2.true_pose[:2] - start[:2])) > 0.01:
+                moved_at = bench.sim_time
+        log = bench.log
+    # lgv2 stood still until its start time; its lap is timed from then.
+    assert moved_at >= 4.0
+    lap2 = log.vehicles["lgv2"].laps[0]
+    assert lap2.start_time == pytest.approx(4.0, abs=0.01)
+    assert lap2.completed
+    # lgv1 drove the two segments' part of the loop, from (4.3, 5.5) to (10, 2.8).
+    lap1 = log.vehicles["lgv1"].laps[0]
+    poses = np.asarray(log.vehicles["lgv1"].true_poses)
+    assert lap1.completed
+    np.testing.assert_allclose(poses[0, :2], (4.3, 5.5), atol=0.1)
+    np.testing.assert_allclose(poses[-1, :2], (10.0, 2.8), atol=0.3)
+    assert max(loop.distance(shapely.Point(xy)) for xy in poses[:, :2]) < 0.15
+    # Its segment maps are in the fleet's frames (a test above compares a rotated loop).
+    assert [s.name for s in lgv1.segments] == ["turn_southwest", "south_start"]
+    assert all(s.origin is bench.segments[bench.segment_key(s.name)].origin
+               for s in lgv1.segments)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import shapely
@@ -106,21 +108,57 @@ def test_merge_drops_what_the_sender_no_longer_holds_and_keeps_what_it_did_not_p
     mine = LocalMap()
     wall = mine.add([[2.0, -1.0], [2.0, 1.0]], stamp=1.0)
     old_box = mine.add([[5.0, 1.0], [5.5, 1.0]], stamp=1.0)
-    fresh_box = mine.add([[8.0, -1.0], [8.5, -1.0]], stamp=20.0)  # seen after the sender came
+    fresh_box = mine.add([[8.0, -1.0], [8.5, -1.0]], stamp=12.0)  # seen after the sender came
     theirs = (
         MapPolyline(0, Polyline([[2.01, -1.0], [2.01, 1.0]]), "confirmed", 50, 0, 2.0, 15.0),
         MapPolyline(1, Polyline([[3.0, 2.0], [3.4, 2.0]]), "new", 1, 0, 14.0, 14.0),
         MapPolyline(2, Polyline([[6.0, 2.0], [6.4, 2.0]]), "blank", 3, 2, 3.0, 4.0),
+        # Seen 40 times in the sender's pass, missed by its last two scans.
+        MapPolyline(3, Polyline([[0.0, 3.0], [0.5, 3.0]]), "blank", 40, 2, 11.0, 13.0),
+        # Last seen before we drove past (12 s) and we do not hold it: contradicted.
+        MapPolyline(4, Polyline([[0.0, -3.0], [0.5, -3.0]]), "confirmed", 9, 0, 10.5, 11.0),
     )
     changed = merge_segment_map(mine, SegmentMessage(0, 1, 16.0, 10.0, theirs))
-    assert changed == 3
-    assert sorted(mine.entries) == [wall, fresh_box, 3]
+    assert changed == 4
+    assert sorted(mine.entries) == [wall, fresh_box, 3, 4]
+    # The wall: our sighting is older than the sender's pass, so its view wins outright.
     assert mine[wall].status == "confirmed"
     assert mine[wall].hits == 50
-    assert mine[wall].last_seen == 15.0
-    np.testing.assert_allclose(mine[wall].polyline.points[:, 0], 2.0 + 0.01 * 50 / 51, atol=1e-9)
+    assert (mine[wall].first_seen, mine[wall].last_seen) == (1.0, 15.0)
+    np.testing.assert_allclose(mine[wall].polyline.points, [[2.01, -1.0], [2.01, 1.0]])
     assert old_box not in mine
+    assert mine[3].status == "new"
     np.testing.assert_allclose(mine[3].polyline.points, [[3.0, 2.0], [3.4, 2.0]])
+    assert (mine[4].status, mine[4].hits) == ("confirmed", 40)
+    np.testing.assert_allclose(mine[4].polyline.points, [[0.0, 3.0], [0.5, 3.0]])
+
+
+def test_merge_averages_sightings_of_the_same_time():
+    mine = LocalMap()
+    wall = mine.add([[2.0, -1.0], [2.0, 1.0]], stamp=12.0)  # we saw it after the sender came
+    theirs = (MapPolyline(0, Polyline([[2.01, -1.0], [2.01, 1.0]]), "confirmed", 50, 0, 2.0,
+                          15.0),)
+    merge_segment_map(mine, SegmentMessage(0, 1, 16.0, 10.0, theirs))
+    assert (mine[wall].status, mine[wall].hits, mine[wall].last_seen) == ("confirmed", 50, 15.0)
+    # One hit of ours against 50 of theirs: 50/51 of the way to their wall.
+    np.testing.assert_allclose(mine[wall].polyline.points[:, 0], 2.0 + 0.01 * 50 / 51, atol=1e-9)
+
+
+def test_a_box_moved_along_a_rack_is_where_the_newer_map_says():
+    """A pallet face pushed 0.5 m along the rack: not averaged with where it was."""
+    mine = LocalMap()
+    rack = mine.add([[0.0, -2.0], [12.0, -2.0]], stamp=3.0)
+    face = mine.add([[3.0, -1.2], [4.2, -1.2]], stamp=3.0)
+    mine.restore(dataclasses.replace(mine[face], status="confirmed", hits=100), replace=True)
+    moved = Polyline([[3.5, -1.2], [4.7, -1.2]])
+    theirs = (
+        MapPolyline(7, Polyline([[0.0, -2.0], [12.0, -2.0]]), "confirmed", 300, 0, 1.0, 25.0),
+        MapPolyline(9, moved, "confirmed", 80, 0, 21.0, 24.0),
+    )
+    merge_segment_map(mine, SegmentMessage(0, 1, 26.0, 20.0, theirs))
+    assert sorted(mine.entries) == [rack, face]
+    np.testing.assert_allclose(mine[face].polyline.points, moved.points)
+    assert (mine[face].status, mine[face].hits, mine[face].last_seen) == ("confirmed", 100, 24.0)
 
 
 def test_merge_of_an_identical_map_changes_no_geometry():
@@ -135,3 +173,17 @@ def test_merge_of_an_identical_map_changes_no_geometry():
     assert sorted(mine.entries) == sorted(before)
     for map_id, points in before.items():
         np.testing.assert_allclose(mine[map_id].polyline.points, points, atol=1e-5)
+
+
+def test_every_received_piece_replaces_the_older_polyline_it_pairs_with():
+    """A wall we saw whole, seen by the sender in two pieces (a pallet before it since)."""
+    mine = LocalMap()
+    wall = mine.add([[0.0, 2.0], [10.0, 2.0]], stamp=1.0)
+    pieces = ([[0.0, 2.0], [4.0, 2.0]], [[6.0, 2.0], [10.0, 2.0]])
+    theirs = tuple(MapPolyline(k, Polyline(piece), "confirmed", 30, 0, 21.0, 24.0)
+                   for k, piece in enumerate(pieces))
+    merge_segment_map(mine, SegmentMessage(0, 1, 26.0, 20.0, theirs))
+    held = sorted(entry.polyline.points.tolist() for entry in mine)
+    assert held == sorted(pieces)
+    assert wall in mine                       # one piece carries the wall's id on
+    assert all(entry.status == "confirmed" and entry.first_seen == 1.0 for entry in mine)
