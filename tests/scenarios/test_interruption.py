@@ -109,6 +109,13 @@ def _command(kind: str, tmp_path: Path, out: Path) -> tuple[list[str], str | Non
     return ["replay", str(log), "--no-figures", "--tile", "2"], "replay corridor: 500 scans", 0
 
 
+def _interruptible() -> None:
+    # A command started from a terminal receives Ctrl-C; a test suite started in the
+    # background (`nohup make test &`) passes SIGINT on ignored, and Python would then never
+    # install its KeyboardInterrupt handler in the child. Restore what a terminal gives.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(args: list[str], out: Path, cwd: Path) -> subprocess.Popen:
     # stdout goes to a file: workers writing into a closed pipe would die of SIGPIPE and
     # hide whether they stop with their parent on their own.
@@ -116,6 +123,7 @@ def _start(args: list[str], out: Path, cwd: Path) -> subprocess.Popen:
         return subprocess.Popen(
             [sys.executable, "-m", "scenarios.cli", *args, "--out", str(out)],
             cwd=cwd, stdout=stdout, stderr=subprocess.PIPE, text=True,
+            preexec_fn=_interruptible,
         )
 
 
