@@ -21,10 +21,12 @@ from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from robots.presets import PRESETS
 from scenarios.layout import check_scenario_layout, scenario_world
 from scenarios.routes import check_vehicles
 from scenarios.spec import ScenarioSpec
 from semistatic.errors import SpecError, join_key
+from semistatic.noise import spec_noise_params
 from semistatic.params import MapperParams
 from semistatic.validation import (
     FILE_KEY,
@@ -41,6 +43,7 @@ __all__ = [
     "OVERRIDE_FILE",
     "PAPER_SCENARIOS",
     "bundled_scenarios",
+    "laser_mapper_params",
     "load_scenario",
     "mapper_from_table",
     "paper_scenarios",
@@ -296,12 +299,41 @@ def scenario_from_toml(
 
 
 def _spec_from_table(table: Mapping[str, Any], *, file: str) -> ScenarioSpec:
-    """Build the spec from a table whose ``name`` and ``world`` are already resolved."""
+    """Build the spec from a table whose ``name`` and ``world`` are already resolved.
+
+    The mapper's noise thresholds default to the robot's safety laser (the mapper's input)
+    at the scenario's noise scale (:func:`laser_mapper_params`); ``[mapper]`` keys win.
+    """
     table = dict(table)
-    mapper = mapper_from_table(table.pop("mapper", {}), file=file)
-    return from_table(
+    mapper_table = table.pop("mapper", {})
+    mapper = mapper_from_table(mapper_table, file=file)
+    spec = from_table(
         ScenarioSpec, table, file=file, key="", fixed={"source": file, "mapper": mapper}
     )
+    if spec.robot not in PRESETS:  # the layout check names it
+        return spec
+    base = laser_mapper_params(spec)
+    return dataclasses.replace(spec, mapper=mapper_from_table(mapper_table, file=file, base=base))
+
+
+def laser_mapper_params(spec: ScenarioSpec) -> MapperParams:
+    """Return the default mapper thresholds for the range noise of ``spec``'s safety laser.
+
+    The mapper reads the safety laser's scans, whose range noise is the data sheet's sigma
+    times ``spec.noise.range``; :func:`semistatic.noise.spec_noise_params` sets the
+    Douglas-Peucker tolerance and the breakpoint noise from it.
+
+    Examples
+    --------
+    >>> from scenarios.spec import ScenarioSpec
+    >>> laser_mapper_params(ScenarioSpec("s", world="sim1")) == MapperParams()  # LMS100 1.2 cm
+    True
+    >>> lgv = laser_mapper_params(ScenarioSpec("w", world="warehouse", robot="lgv"))  # S300
+    >>> round(lgv.epsilon, 3), lgv.breakpoint_sigma_r
+    (0.075, 0.03)
+    """
+    laser = PRESETS[spec.robot].safety_laser.laser
+    return spec_noise_params(MapperParams(), laser.range_sigma * spec.noise.range)
 
 
 def load_scenario(name_or_path: str | Path, *, overrides: Iterable[str] = ()) -> ScenarioSpec:

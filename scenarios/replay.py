@@ -119,10 +119,15 @@ on that only reshuffles which polylines revisits are compared with (measured: in
 4.35 -> 4.38 cm, aces 4.40 -> 4.60 cm with the cut)."""
 
 
-REPLAY_ALIGNMENT = AlignmentParams()
+REPLAY_ALIGNMENT = AlignmentParams(min_points=10)
 """Scan-to-reference alignment of revisit scans (when ``ReplayOptions.align``): a 20 cm
 correspondence gate, 2 cm Cauchy scale (about the logs' range noise), corrections bounded to
-30 cm and 5 deg, rejected on fewer than 30 matched points or a degenerate geometry."""
+30 cm and 5 deg, rejected on fewer than 10 matched points; directions the geometry leaves
+open are kept as logged (partial alignment). Ten points, not the default 30: a revisit of a
+place seen through a doorway or along a short wall matches a few metres of it, and the
+constraint test, not the point count, decides what such a match can correct. Measured
+(Table 1 mean of means, intel / aces): 30 points 4.31 / 4.33 cm (168 intel revisit scans
+left unaligned for too few points), 20: 4.29 / 4.32, 10: 4.27 / 4.32."""
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,13 @@ corners but moves the vertices onto the surface the readings describe:
    total least squares (the principal axis of its readings);
 2. adjacent edges are merged while one line fits all their readings within the tolerance
    (the merge step of split-and-merge): noise makes Douglas-Peucker cut straight walls;
+   an end edge made of the end reading alone (one step past the last corner) is dropped
+   when that reading is a *mixed pixel* (:func:`is_mixed_pixel`): reached by a step
+   nearly along its own beam and lying beyond the line of the edge before it, i.e. a
+   return from between a surface's edge and what lies behind it. Such a hook changes
+   from view to view (on the Intel log a third of the revisit pairs' largest distance
+   was at a scan polyline's end), and the reading stays out of every polyline, so no
+   polyline crosses its ray in front of it;
 3. an inner vertex is the intersection of the two adjacent fitted lines, unless they are
    nearly parallel or cross far from the corner reading (then the mean of the corner
    reading's projections onto both lines);
@@ -40,7 +47,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["fit_polyline", "fit_polylines", "total_least_squares"]
+__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "is_mixed_pixel",
+           "total_least_squares"]
 
 # Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
 # their intersection is ill-conditioned, so the corner reading's projections are used.
@@ -49,6 +57,11 @@ MIN_CORNER_SINE = math.sin(math.radians(10.0))
 # A beam meeting the fitted line at less than this incidence (sin of 10 deg) grazes it: the
 # crossing moves by 1/sin of the line's error, so the end reading's projection is used.
 MIN_BEAM_SINE = math.sin(math.radians(10.0))
+
+# A one-reading end edge within this angle (sin of 30 deg) of the end reading's own beam
+# is a step along the beam: a mixed pixel at a depth jump, or a surface at grazing
+# incidence, whose range is the least certain of the scan.
+MIXED_PIXEL_SINE = math.sin(math.radians(30.0))
 
 # An intersection farther from its corner reading than this share of the shorter adjacent
 # edge (chord) is not where the readings bend: fall back to the projections.
@@ -84,6 +97,37 @@ def total_least_squares(points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     if dx == 0.0 and dy == 0.0:
         raise ValueError("total_least_squares: all points are equal, no line is defined")
     return np.array([mx, my]), np.array([dx, dy])
+
+
+def is_mixed_pixel(points: ArrayLike, end: int, corner: int, far: int) -> bool:
+    """Return whether reading ``end``, one step past ``corner``, is a mixed pixel.
+
+    ``points`` are readings in the sensor frame (beams from the origin); ``corner`` is the
+    reading next to ``end`` and ``far`` the other end of the edge before (the line fitted
+    by total least squares to the readings ``corner..far``). ``end`` is a mixed pixel when
+    the step from ``corner`` to it is within 30 deg (:data:`MIXED_PIXEL_SINE`) of its own
+    beam and it lies farther along that beam than the line: a return from between the
+    edge of a surface and what lies behind it.
+
+    Examples
+    --------
+    >>> wall = [[2.0, y] for y in (-0.2, -0.1, 0.0, 0.1)]  # x = 2, beams from the origin
+    >>> behind = [[2.3, 0.2 * 2.3 / 2.0]]  # on the next beam, 30 cm beyond the wall
+    >>> is_mixed_pixel(wall + behind, end=4, corner=3, far=0)
+    True
+    >>> turning = [[2.06, 0.2]]  # the next face turns away at 31 deg to this beam
+    >>> is_mixed_pixel(wall + turning, end=4, corner=3, far=0)
+    False
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    count = points.shape[0]
+    if not (0 <= end < count and 0 <= corner < count and 0 <= far < count):
+        raise ValueError(f"is_mixed_pixel: positions must lie in 0..{count - 1}")
+    if abs(end - corner) != 1 or corner == far or (end - corner) * (far - corner) > 0:
+        raise ValueError("is_mixed_pixel: end must be next to corner, on the side away from far")
+    low, high = min(corner, far), max(corner, far)
+    return bool(_mixed_pixel(np.ascontiguousarray(points[:, 0]),
+                             np.ascontiguousarray(points[:, 1]), end, corner, low, high))
 
 
 def fit_polyline(
@@ -216,6 +260,26 @@ def _project(px, py, mx, my, dx, dy):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
+def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
+    """Return whether reading ``end`` next to ``corner`` is a mixed pixel (see above)."""
+    px = x[end]
+    py = y[end]
+    norm = math.hypot(px, py)
+    ex = x[corner] - px
+    ey = y[corner] - py
+    step = math.hypot(ex, ey)
+    if norm == 0.0 or step == 0.0 or abs(px * ey - py * ex) / (norm * step) >= MIXED_PIXEL_SINE:
+        return False
+    mx, my, dx, dy = _fit(x, y, low, high)
+    sine = (px * dy - py * dx) / norm
+    if sine == 0.0:
+        return False
+    # Beyond the line: the reading is farther along its beam than where the beam
+    # crosses it (at t = cross(m, d) / cross(beam, d)).
+    return norm > (mx * dy - my * dx) / sine
+
+
+@numba.njit(cache=True)
 def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
     count = corners.size
     out = np.empty((count, 2))
@@ -239,6 +303,15 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
                 size += 1
         merged[size] = corners[stop]
         size += 1
+        # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
+        if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
+                x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2]):
+            size -= 1
+        if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
+                x, y, merged[0], merged[1], merged[1], merged[2]):
+            for k in range(size - 1):
+                merged[k] = merged[k + 1]
+            size -= 1
         for edge in range(size - 1):
             mx, my, dx, dy = _fit(x, y, merged[edge], merged[edge + 1])
             fits[edge, 0] = mx

@@ -50,16 +50,20 @@ class MapperParams:
     breakpoint_lambda
         Adaptive breakpoint angle lambda (rad), Borges & Aldon 2004; 10-20 deg typical.
     breakpoint_sigma_r
-        Range noise sigma_r (m) added as ``3 sigma_r`` to the breakpoint distance.
+        Range noise sigma_r (m) added as ``3 sigma_r`` to the breakpoint distance. A
+        scenario that leaves it out gets its robot's safety laser's range noise
+        (:func:`semistatic.noise.spec_noise_params`); replay at least the log's measured
+        noise.
     min_points
         Intervals with fewer valid points are dropped. Two by default: small clusters
         (chair and table legs) are real objects; the life cycle decides whether they are
         confirmed.
     epsilon
         Douglas-Peucker tolerance (m), also used to re-simplify after merge/join. The
-        default is 2.5 times the range noise of the Sick LMS100 (1.2 cm) that the bundled
-        scenarios simulate; replay sets it to three times the log's measured noise
-        (:func:`semistatic.noise.noise_epsilon`).
+        default is 2.5 times the range noise of the Sick LMS100 (1.2 cm); a scenario that
+        leaves it out gets 2.5 times its robot's safety laser's range noise (the S300's
+        3 cm: 7.5 cm; :func:`semistatic.noise.spec_noise_params`), replay three times
+        the log's measured noise (:func:`semistatic.noise.noise_epsilon`).
     vertex_placement
         ``"fitted"`` (default): total-least-squares edges, vertices at the intersections
         of adjacent fitted lines and on the end readings' beams

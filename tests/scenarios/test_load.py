@@ -577,3 +577,34 @@ def test_check_moves_blames_the_move_that_broke_the_layout():
         check_moves(world, [good, bad], footprint=PIONEER_FOOTPRINT, file="f.toml")
     assert caught.value.key == "moves[1]"
     assert "box 'pallet_turn'" in caught.value.message
+
+
+# --- mapper thresholds from the safety laser's noise -------------------------------------
+
+
+def test_mapper_noise_thresholds_follow_the_safety_laser_unless_set(tmp_path):
+    # the lgv's safety laser is the S300 (3 cm): 2.5 x 3 cm tolerance, 3 cm breakpoint
+    # noise; the pioneer's LMS100 (1.2 cm) keeps the library defaults, 3 cm and 1.2 cm
+    s300 = get_preset("lgv").safety_laser.laser.range_sigma
+    lms100 = get_preset("pioneer3dx").safety_laser.laser.range_sigma
+    assert (s300, lms100) == (0.03, 0.012)
+    warehouse = load_scenario("warehouse").mapper
+    assert warehouse.epsilon == pytest.approx(0.075)
+    assert warehouse.breakpoint_sigma_r == pytest.approx(0.03)
+    assert warehouse.vertex_placement == "fitted"
+    for name in paper_scenarios():
+        mapper = load_scenario(name).mapper
+        assert (mapper.epsilon, mapper.breakpoint_sigma_r) == (0.03, 0.012)
+    # the scenario's noise scale scales the laser's noise, hence the thresholds
+    path = write(tmp_path, 'world = "sim1"\n[noise]\nrange = 2.0\n')
+    scaled = load_scenario(path).mapper
+    assert (scaled.epsilon, scaled.breakpoint_sigma_r) == pytest.approx((0.06, 0.024))
+    # a file's [mapper] keys and --set win over the laser's
+    path = write(tmp_path, 'world = "warehouse"\nrobot = "lgv"\n[mapper]\nepsilon = 0.04\n')
+    mapper = load_scenario(path).mapper
+    assert (mapper.epsilon, mapper.breakpoint_sigma_r) == pytest.approx((0.04, 0.03))
+    mapper = load_scenario(path, overrides=["mapper.breakpoint_sigma_r=0.02"]).mapper
+    assert (mapper.epsilon, mapper.breakpoint_sigma_r) == pytest.approx((0.04, 0.02))
+    # a noiseless laser keeps the defaults (a tolerance must stay above zero)
+    path = write(tmp_path, 'world = "sim1"\n[noise]\nrange = 0.0\n')
+    assert load_scenario(path).mapper == MapperParams()

@@ -5,7 +5,7 @@ import pytest
 import shapely
 
 from semistatic.extraction import douglas_peucker, extract_polylines
-from semistatic.fitting import fit_polyline, total_least_squares
+from semistatic.fitting import fit_polyline, is_mixed_pixel, total_least_squares
 from semistatic.params import MapperParams
 from tests.semistatic.synthetic import box, box_corners, cast_scan, scene, wall
 
@@ -97,9 +97,10 @@ def test_a_box_corner_seen_obliquely_does_not_stretch_the_face_past_it():
         for seed in range(30):
             pose = (4.064, -0.549, heading)
             scan = cast_scan(segments, pose, noise=0.01, rng=np.random.default_rng(seed))
-            # the polyline that starts at the scan's first beam (others are isolated
-            # noise-split readings of the far face)
-            (line,) = [line for line in extract_polylines(scan) if line.scan_indices[0] == 0]
+            # the polyline that starts at the scan's first beam, or at the second where the
+            # first grazes the near face as a one-reading hook (a mixed-pixel end: dropped);
+            # others are isolated noise-split readings of the far face
+            (line,) = [line for line in extract_polylines(scan) if line.scan_indices[0] <= 1]
             cos, sin = np.cos(heading), np.sin(heading)
             world = line.points @ np.array([[cos, sin], [-sin, cos]]) + pose[:2]
             first = scan.ranges[0] * np.array(
@@ -163,3 +164,77 @@ def test_a_two_reading_object_becomes_a_polyline():
     assert [line.scan_indices.tolist() for line in lines if line.points[:, 0].max() < 3.1] == [
         hits.tolist()
     ]
+
+
+def wall_with_end_reading(end_range, rng, count=21):
+    """Readings of the wall x = 2 on beams 1 deg apart, the last beam reading ``end_range``.
+
+    ``end_range=None`` leaves the last beam on the wall too.
+    """
+    angles = np.radians(np.arange(count) - count // 2)
+    ranges = 2.0 / np.cos(angles) + rng.normal(0.0, 0.003, count)
+    if end_range is not None:
+        ranges[-1] = end_range
+    return np.column_stack((ranges * np.cos(angles), ranges * np.sin(angles)))
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_mixed_pixel_at_an_end_is_left_out_and_no_edge_crosses_its_ray(seed, reverse):
+    rng = np.random.default_rng(seed)
+    # the last beam returns 25 cm beyond the wall: between its edge and the background
+    wall_range = 2.0 / np.cos(np.radians(10.0))
+    points = wall_with_end_reading(wall_range + 0.25, rng)
+    if reverse:
+        points = points[::-1].copy()
+    mixed = 0 if reverse else points.shape[0] - 1
+    vertices, kept = fit_polyline(points, douglas_peucker(points, 0.01), 0.01)
+    assert mixed not in kept.tolist()
+    ray = shapely.LineString([(0.0, 0.0), points[mixed]])
+    assert not shapely.LineString(vertices).intersects(ray)
+    # the polyline is the wall, ending on the beam of the reading next to the mixed pixel
+    assert np.abs(vertices[:, 0] - 2.0).max() < 0.01
+    neighbour = points[1] if reverse else points[-2]
+    end = vertices[0] if reverse else vertices[-1]
+    assert abs(end[0] * neighbour[1] - end[1] * neighbour[0]) < 1e-9
+
+
+@pytest.mark.parametrize("end_offset", [-0.25, 0.0])
+def test_an_end_reading_in_front_of_the_line_or_on_it_is_kept(end_offset):
+    # in front of the wall (the far side of a mixed pixel belongs to a nearer surface,
+    # which the reading would also fit) or on it: a surface the polyline must reach
+    rng = np.random.default_rng(0)
+    wall_range = 2.0 / np.cos(np.radians(10.0))
+    points = wall_with_end_reading(wall_range + end_offset, rng)
+    corners = douglas_peucker(points, 0.01)
+    if end_offset:
+        assert corners[-2] == points.shape[0] - 2  # a one-reading end edge
+    _, kept = fit_polyline(points, corners, 0.01)
+    assert kept[-1] == points.shape[0] - 1
+
+
+def test_a_corner_whose_next_face_turns_across_the_beam_is_kept():
+    # one reading on a face that turns 90 deg at the wall's end (a real box corner seen
+    # by one beam): the step to it is far from its beam, so it is no mixed pixel
+    rng = np.random.default_rng(1)
+    points = wall_with_end_reading(None, rng)
+    last_beam = np.arctan2(points[-1, 1], points[-1, 0]) + np.radians(1.0)
+    corner = points[-1]
+    # the next face: x grows from the corner along y = corner y
+    hook = np.array([corner[1] / np.tan(last_beam), corner[1]])
+    points = np.vstack((points, hook))
+    assert not is_mixed_pixel(points, points.shape[0] - 1, points.shape[0] - 2, 0)
+    corners = douglas_peucker(points, 0.01)
+    assert corners[-2] == points.shape[0] - 2  # a one-reading end edge
+    _, kept = fit_polyline(points, corners, 0.01)
+    assert kept[-1] == points.shape[0] - 1
+
+
+def test_is_mixed_pixel_rejects_positions_that_are_not_an_end_step():
+    points = [[2.0, -0.1], [2.0, 0.0], [2.0, 0.1], [2.3, 0.2]]
+    with pytest.raises(ValueError, match="next to corner"):
+        is_mixed_pixel(points, end=3, corner=1, far=0)
+    with pytest.raises(ValueError, match="next to corner"):
+        is_mixed_pixel(points, end=1, corner=2, far=0)
+    with pytest.raises(ValueError, match="lie in"):
+        is_mixed_pixel(points, end=4, corner=3, far=0)
