@@ -64,7 +64,9 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help="also trace RMSE against vertices per scan at these tolerances (m)",
     )
     evaluate.add_argument(
-        "--out", type=Path, help="output directory (default results/evaluate-LOG)"
+        "--out", type=Path,
+        help="where --sweep writes its curve (default results/evaluate-LOG); the scores "
+             "alone are printed, not written",
     )
     return evaluate
 
