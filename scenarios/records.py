@@ -70,7 +70,6 @@ class LapLog:
     false_objects_from_people: int = 0
     false_objects_from_vehicles: int | None = None  # scored in a fleet only
     latencies: dict[str, int | None] = field(default_factory=dict)
-    person_stopped_robot: bool = False
 
 
 @dataclass(frozen=True, eq=False)
