@@ -306,13 +306,11 @@ def _spec_from_table(table: Mapping[str, Any], *, file: str) -> ScenarioSpec:
     """
     table = dict(table)
     mapper_table = table.pop("mapper", {})
-    mapper = mapper_from_table(mapper_table, file=file)
     spec = from_table(
-        ScenarioSpec, table, file=file, key="", fixed={"source": file, "mapper": mapper}
+        ScenarioSpec, table, file=file, key="", fixed={"source": file, "mapper": MapperParams()}
     )
-    if spec.robot not in PRESETS:  # the layout check names it
-        return spec
-    base = laser_mapper_params(spec)
+    # An unknown robot keeps the plain defaults: the layout check names it.
+    base = laser_mapper_params(spec) if spec.robot in PRESETS else MapperParams()
     return dataclasses.replace(spec, mapper=mapper_from_table(mapper_table, file=file, base=base))
 
 
