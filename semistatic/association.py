@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import wrap_angle_compiled
 from semistatic.hausdorff import pairwise_restricted_hausdorff
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices
 from semistatic.similarity import similarity
 
 __all__ = [
@@ -114,11 +114,7 @@ def _boxes(polylines: list[Polyline]) -> np.ndarray:
 
 def _concatenated(polylines: Sequence[Polyline]) -> tuple[np.ndarray, np.ndarray]:
     """Return all vertices one after the other and the ``(K + 1,)`` bounds of each polyline."""
-    bounds = np.zeros(len(polylines) + 1, dtype=np.int64)
-    bounds[1:] = np.cumsum([len(line) for line in polylines])
-    if not polylines:
-        return np.empty((0, 2)), bounds
-    return np.concatenate([line.points for line in polylines]), bounds
+    return pack_vertices([line.points for line in polylines])
 
 
 @numba.njit(cache=True)
