@@ -27,7 +27,6 @@ array([ 0.   ,  0.   , -0.137])
 
 from __future__ import annotations
 
-import bisect
 import itertools
 import math
 
@@ -170,11 +169,6 @@ class SplinePath:
         self._coarse_t = self._t(self._coarse_s)
         self._coarse_points = self._evaluate(self._coarse_t)[0]
 
-        # The same pieces as Python floats, for one-point queries (the follower's 50 Hz
-        # pose and curvature): math on floats costs a fraction of numpy's per-call
-        # overhead on tiny arrays, and evaluates the very same expressions.
-        self._spline_scalar = _ScalarCubic(self._breaks, self._coefficients)
-        self._s_to_t_scalar = _ScalarCubic(self._s_to_t_breaks, self._s_to_t_coefficients)
         # What the compiled projection reads: every cubic as (4, pieces, columns).
         self._projection_tables = (
             np.ascontiguousarray(self._coarse_s),
@@ -229,7 +223,19 @@ class SplinePath:
 
     def _t_one(self, s: float) -> float:
         """Return ``t(s)`` for one finite float ``s``, exactly as ``_t`` computes it."""
-        return self._s_to_t_scalar.value(min(max(s, 0.0), self.length))
+        breaks, coefficients = self._projection_tables[6:8]
+        return _cubic_at(breaks, coefficients, min(max(s, 0.0), self.length), 0)[0]
+
+    def _scalar_evaluate(self, t: float) -> tuple[float, float, float, float, float, float]:
+        """Return ``(x, y, x', y', x'', y'')`` at one ``t``: ``_evaluate``'s expressions, compiled.
+
+        The follower's 50 Hz pose and curvature: one compiled call per coordinate costs a
+        fraction of numpy's per-call overhead on tiny arrays.
+        """
+        breaks, coefficients = self._projection_tables[4:6]
+        x, dx, ddx = _cubic_at(breaks, coefficients, t, 0)
+        y, dy, ddy = _cubic_at(breaks, coefficients, t, 1)
+        return x, y, dx, dy, ddx, ddy
 
     def point(self, s: ArrayLike) -> np.ndarray:
         """Return the path point(s) at arc length ``s``: shape ``s.shape + (2,)``.
@@ -250,7 +256,7 @@ class SplinePath:
         1.5708
         """
         if _is_finite_float(s):
-            _, _, dx, dy, _, _ = self._spline_scalar.evaluate(self._t_one(s))
+            _, _, dx, dy, _, _ = self._scalar_evaluate(self._t_one(s))
             return float(np.arctan2(dy, dx))
         velocity = self._evaluate(self._t(s))[1]
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
@@ -266,7 +272,7 @@ class SplinePath:
         2.0
         """
         if _is_finite_float(s):
-            _, _, dx, dy, ddx, ddy = self._spline_scalar.evaluate(self._t_one(s))
+            _, _, dx, dy, ddx, ddy = self._scalar_evaluate(self._t_one(s))
             # numpy's hypot and power, not math's: they round differently in the last bit.
             return float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
         _, d1, d2 = self._evaluate(self._t(s))
@@ -283,7 +289,7 @@ class SplinePath:
         array([0.5, 0. , 0. ])
         """
         if _is_finite_float(s):
-            x, y, dx, dy, _, _ = self._spline_scalar.evaluate(self._t_one(s))
+            x, y, dx, dy, _, _ = self._scalar_evaluate(self._t_one(s))
             return np.array([x, y, np.arctan2(dy, dx)])
         point, velocity, _ = self._evaluate(self._t(s))
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
@@ -417,7 +423,7 @@ class SplinePath:
 
         The expressions of ``pose`` and ``curvature``, so the same values to the last bit.
         """
-        x, y, dx, dy, ddx, ddy = self._spline_scalar.evaluate(self._t_one(s))
+        x, y, dx, dy, ddx, ddy = self._scalar_evaluate(self._t_one(s))
         # numpy's atan2, hypot and power, not math's: they round differently in the last bit.
         heading = float(np.arctan2(dy, dx))
         return x, y, heading, float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
@@ -443,59 +449,6 @@ def _evaluate_cubic(
     first = (3.0 * c3 * h + 2.0 * c2) * h + c1
     second = 6.0 * c3 * h + 2.0 * c2
     return value, first, second
-
-
-class _ScalarCubic:
-    """A piecewise cubic (scipy ``PPoly`` layout) as Python floats, evaluated one ``x`` at a time.
-
-    Performs exactly the float operations of ``_evaluate_cubic`` for one ``x`` (same
-    piece search, same Horner order), so the two agree to the last bit.
-    """
-
-    def __init__(self, breaks: np.ndarray, coefficients: np.ndarray) -> None:
-        self.breaks = breaks.tolist()
-        self.last_piece = len(self.breaks) - 2
-        # One flat tuple per piece: (c3, c2, c1, c0), or (c3x, c3y, c2x, ..., c0y).
-        self.pieces = [tuple(piece.ravel().tolist()) for piece in np.moveaxis(coefficients, 1, 0)]
-        if coefficients.ndim == 3:
-            # For ``evaluate``: the piece's start and the products by 3, 2 and 6 that the
-            # derivatives begin with (``3.0 * c3 * h`` is ``(3.0 * c3) * h``: same bits).
-            self._expanded = [
-                (
-                    start,
-                    *piece,
-                    *(3.0 * c for c in piece[:2]),
-                    *(2.0 * c for c in piece[2:4]),
-                    *(6.0 * c for c in piece[:2]),
-                )
-                for start, piece in zip(self.breaks, self.pieces, strict=False)
-            ]
-
-    def value(self, x: float) -> float:
-        """Return the value of a scalar-valued cubic at ``x``."""
-        # The piece holding x, clamped to the first and last (see ``evaluate``).
-        piece = bisect.bisect_right(self.breaks, x, 1, self.last_piece + 1) - 1
-        c3, c2, c1, c0 = self.pieces[piece]
-        h = x - self.breaks[piece]
-        return ((c3 * h + c2) * h + c1) * h + c0
-
-    def evaluate(self, x: float) -> tuple[float, float, float, float, float, float]:
-        """Return ``(x, y, x', y', x'', y'')`` of a 2-vector-valued cubic at ``x``."""
-        # The piece holding x, clamped as _evaluate_cubic clamps: searching breaks[1:-1]
-        # gives piece 0 below the second break and the last piece from the last inner one.
-        piece = bisect.bisect_right(self.breaks, x, 1, self.last_piece + 1) - 1
-        start, c3x, c3y, c2x, c2y, c1x, c1y, c0x, c0y, t3x, t3y, t2x, t2y, s3x, s3y = (
-            self._expanded[piece]
-        )
-        h = x - start
-        return (
-            ((c3x * h + c2x) * h + c1x) * h + c0x,
-            ((c3y * h + c2y) * h + c1y) * h + c0y,
-            (t3x * h + t2x) * h + c1x,
-            (t3y * h + t2y) * h + c1y,
-            s3x * h + t2x,
-            s3y * h + t2y,
-        )
 
 
 def _is_finite_float(s: object) -> bool:
