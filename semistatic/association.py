@@ -404,11 +404,11 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
         for k in range(n):
             path[k, 0], path[k, 1] = k, k
     else:
-        hard = np.ones((n, m))
+        hard = np.empty((n, m))
         for a in range(n):
             for b in range(m):
-                if feasible[a, b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
-                    hard[a, b] = 0.0
+                shaped_pair = scan_lengths[a] > 0.0 and map_lengths[b] > 0.0
+                hard[a, b] = 0.0 if feasible[a, b] and shaped_pair else 1.0
         path, totals = _dtw_kernel(hard)
         if not _is_unique(path, totals):
             return path, False
