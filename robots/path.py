@@ -467,6 +467,11 @@ def _table_nodes(knot_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([[knot_t[0]], *pieces]), np.array(knot_rows)
 
 
+# Columns of a coefficient table as numpy integers: numba compiles a call with a Python int
+# constant as a separate specialisation on that literal value, a numpy integer it does not.
+_COLUMN0, _COLUMN1 = np.int64(0), np.int64(1)
+
+
 @numba.njit(cache=True)
 def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
     """Return value, first and second derivative of one piecewise cubic at ``x``.
@@ -504,8 +509,8 @@ def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def _slope_at(breaks, coefficients, t, x, y):  # pragma: no cover - compiled
     """Return ``d/dt |r(t) - q|^2 / 2``, its ``t``-derivative and ``r(t)`` for ``q = (x, y)``."""
-    px, dx, ddx = _cubic_at(breaks, coefficients, t, 0)
-    py, dy, ddy = _cubic_at(breaks, coefficients, t, 1)
+    px, dx, ddx = _cubic_at(breaks, coefficients, t, _COLUMN0)
+    py, dy, ddy = _cubic_at(breaks, coefficients, t, _COLUMN1)
     ox, oy = px - x, py - y
     return ox * dx + oy * dy, (dx * dx + dy * dy) + (ox * ddx + oy * ddy), px, py
 
@@ -531,8 +536,8 @@ def _project_points(
     >>> s.round(6)
     array([0.5, 1.5])
     """
-    lo_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, lo, 0)[0]
-    hi_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, hi, 0)[0]
+    lo_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, lo, _COLUMN0)[0]
+    hi_t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, hi, _COLUMN0)[0]
     count = 2
     for k in range(coarse_s.size):
         if lo < coarse_s[k] < hi:
@@ -545,9 +550,9 @@ def _project_points(
             candidates[row] = coarse_t[k]
             sample_x[row], sample_y[row] = coarse_x[k], coarse_y[k]
             row += 1
-    for k in (0, count - 1):
-        sample_x[k] = _cubic_at(breaks, coefficients, candidates[k], 0)[0]
-        sample_y[k] = _cubic_at(breaks, coefficients, candidates[k], 1)[0]
+    for k in range(0, count, count - 1):  # the window ends, 0 and count - 1 (count >= 2)
+        sample_x[k] = _cubic_at(breaks, coefficients, candidates[k], _COLUMN0)[0]
+        sample_y[k] = _cubic_at(breaks, coefficients, candidates[k], _COLUMN1)[0]
     points, basins = xs.size, min(PROJECTION_BASINS, count)
     rows = points * basins
     t, low, high = np.empty(rows), np.empty(rows), np.empty(rows)
@@ -593,7 +598,10 @@ def _project_points(
     step = np.zeros(rows)
     converged = False
     for _ in range(PROJECTION_ITERATIONS):
-        if not active.any():
+        any_active = False
+        for r in range(rows):
+            any_active = any_active or active[r]
+        if not any_active:
             converged = True
             break
         small = True
@@ -626,12 +634,12 @@ def _project_points(
         for b in range(basins):
             r = b * points + p
             if not converged:
-                position_x[r] = _cubic_at(breaks, coefficients, t[r], 0)[0]
-                position_y[r] = _cubic_at(breaks, coefficients, t[r], 1)[0]
+                position_x[r] = _cubic_at(breaks, coefficients, t[r], _COLUMN0)[0]
+                position_y[r] = _cubic_at(breaks, coefficients, t[r], _COLUMN1)[0]
             dx, dy = position_x[r] - xs[p], position_y[r] - ys[p]
             gap = dx * dx + dy * dy
             if gap < best_gap or b == 0:
                 best_gap, best_t = gap, t[r]
-        s = _cubic_at(t_to_s_breaks, t_to_s_coefficients, best_t, 0)[0]
+        s = _cubic_at(t_to_s_breaks, t_to_s_coefficients, best_t, _COLUMN0)[0]
         result[p] = min(max(s, lo), hi)
     return result

@@ -123,13 +123,19 @@ def _gap_kernel(boxes_a, boxes_b):  # pragma: no cover - compiled
     gaps = np.empty((boxes_a.shape[0], boxes_b.shape[0]))
     for k in range(boxes_a.shape[0]):
         for m in range(boxes_b.shape[0]):
-            gap_x = max(boxes_a[k, 0] - boxes_b[m, 2], boxes_b[m, 0] - boxes_a[k, 2], 0.0)
-            gap_y = max(boxes_a[k, 1] - boxes_b[m, 3], boxes_b[m, 1] - boxes_a[k, 3], 0.0)
-            gap = math.hypot(gap_x, gap_y)
-            # An empty box is never near anything (inf - inf would otherwise give nan).
-            empty = boxes_a[k, 0] > boxes_a[k, 2] or boxes_b[m, 0] > boxes_b[m, 2]
-            gaps[k, m] = math.inf if empty or math.isnan(gap) else gap
+            gaps[k, m] = _box_gap(boxes_a, k, boxes_b, m)
     return gaps
+
+
+@numba.njit(cache=True)
+def _box_gap(boxes_a, k, boxes_b, m):  # pragma: no cover - compiled
+    """Return the Euclidean gap between box ``k`` of ``boxes_a`` and box ``m`` of ``boxes_b``."""
+    gap_x = max(boxes_a[k, 0] - boxes_b[m, 2], boxes_b[m, 0] - boxes_a[k, 2], 0.0)
+    gap_y = max(boxes_a[k, 1] - boxes_b[m, 3], boxes_b[m, 1] - boxes_a[k, 3], 0.0)
+    gap = math.hypot(gap_x, gap_y)
+    # An empty box is never near anything (inf - inf would otherwise give nan).
+    empty = boxes_a[k, 0] > boxes_a[k, 2] or boxes_b[m, 0] > boxes_b[m, 2]
+    return math.inf if empty or math.isnan(gap) else gap
 
 
 def _viewpoint_pose(viewpoint: ArrayLike) -> np.ndarray:
@@ -178,9 +184,13 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
     keep the input order. A polyline runs clockwise when the bearing it sweeps is negative.
     """
     count = bounds.size - 1
-    keys = np.full((count, 3), math.inf)
-    clockwise = np.zeros(count, np.bool_)
+    keys = np.empty((count, 3))
+    clockwise = np.empty(count, np.bool_)
+    order = np.empty(count, np.int64)
     for k in range(count):
+        order[k] = k
+        keys[k, 0] = keys[k, 1] = keys[k, 2] = math.inf
+        clockwise[k] = False
         if bounds[k + 1] == bounds[k]:
             continue
         first, last, nearest = math.inf, -math.inf, math.inf
@@ -201,7 +211,6 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
         keys[k, 0], keys[k, 1], keys[k, 2] = first, last, nearest
         clockwise[k] = swept < 0.0
     # Insertion sort: stable, lexicographic, and fast for the few polylines in view.
-    order = np.arange(count)
     for k in range(1, count):
         item = order[k]
         j = k - 1
@@ -212,7 +221,7 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
     return order, clockwise
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _key_less(keys, a, b):  # pragma: no cover - compiled
     for column in range(3):
         if keys[a, column] != keys[b, column]:
@@ -336,7 +345,7 @@ def _dtw_kernel(cost):  # pragma: no cover - compiled
             j -= 1
     forward = np.empty((size, 2), np.int64)
     for k in range(size):
-        forward[k] = path[size - 1 - k]
+        forward[k, 0], forward[k, 1] = path[size - 1 - k, 0], path[size - 1 - k, 1]
     return forward, totals
 
 
@@ -378,7 +387,11 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
     scan_lengths = _lengths(scan_points, scan_bounds)
     map_lengths = _lengths(map_points, map_bounds)
     n, m = feasible.shape
-    shaped = scan_lengths.min() > 0.0 and map_lengths.min() > 0.0
+    shaped = True
+    for length in scan_lengths:
+        shaped = shaped and length > 0.0
+    for length in map_lengths:
+        shaped = shaped and length > 0.0
     diagonal = shaped and n == m
     for a in range(n):
         for b in range(m):
@@ -391,11 +404,11 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
         for k in range(n):
             path[k, 0], path[k, 1] = k, k
     else:
-        hard = np.ones((n, m))
+        hard = np.empty((n, m))
         for a in range(n):
             for b in range(m):
-                if feasible[a, b] and scan_lengths[a] > 0.0 and map_lengths[b] > 0.0:
-                    hard[a, b] = 0.0
+                shaped_pair = scan_lengths[a] > 0.0 and map_lengths[b] > 0.0
+                hard[a, b] = 0.0 if feasible[a, b] and shaped_pair else 1.0
         path, totals = _dtw_kernel(hard)
         if not _is_unique(path, totals):
             return path, False
@@ -518,16 +531,22 @@ def associate_with_distances(
 @numba.njit(cache=True)
 def _broad_phase(scan_boxes, map_boxes, gate):  # pragma: no cover - compiled
     """Return which pairs' boxes are within ``gate``, and the scan and map polylines in one."""
-    near = _gap_kernel(scan_boxes, map_boxes) <= gate
-    rows = np.empty(near.shape[0], np.int64)
-    columns = np.empty(near.shape[1], np.int64)
+    n, m = scan_boxes.shape[0], map_boxes.shape[0]
+    near = np.empty((n, m), np.bool_)
+    rows = np.empty(n, np.int64)
+    columns = np.zeros(m, np.int64)  # first a count of near pairs per map polyline
     row_count, column_count = 0, 0
-    for a in range(near.shape[0]):
-        if near[a].any():
+    for a in range(n):
+        any_near = False
+        for b in range(m):
+            near[a, b] = _box_gap(scan_boxes, a, map_boxes, b) <= gate
+            any_near = any_near or near[a, b]
+            columns[b] += near[a, b]
+        if any_near:
             rows[row_count] = a
             row_count += 1
-    for b in range(near.shape[1]):
-        if near[:, b].any():
+    for b in range(m):
+        if columns[b] > 0:
             columns[column_count] = b
             column_count += 1
     return near, rows[:row_count], columns[:column_count]
@@ -567,7 +586,7 @@ def _gateable(path, feasible, scan_bounds, map_bounds):  # pragma: no cover - co
         a, b = path[k, 0], path[k, 1]
         filled = scan_bounds[a + 1] > scan_bounds[a] and map_bounds[b + 1] > map_bounds[b]
         if feasible[a, b] and filled:
-            pairs[count] = path[k]
+            pairs[count, 0], pairs[count, 1] = a, b
             count += 1
     return pairs[:count]
 

@@ -131,7 +131,7 @@ def hausdorff(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
     """
     points0 = _kernel_points(as_polyline(p0))
     points1 = _kernel_points(as_polyline(p1))
-    return _restricted_kernel(points0, points1, _UNRESTRICTED, math.inf)
+    return _one_pair(points0, points1, _UNRESTRICTED, math.inf)
 
 
 def restricted_hausdorff(
@@ -168,7 +168,7 @@ def restricted_hausdorff(
     code = _mode_code(mode)
     points0 = _kernel_points(as_polyline(p0))
     points1 = _kernel_points(as_polyline(p1))
-    return _restricted_kernel(points0, points1, code, float(limit))
+    return _one_pair(points0, points1, code, float(limit))
 
 
 def pairwise_restricted_hausdorff(
@@ -230,6 +230,16 @@ def _mode_code(mode: str) -> int:
     return code
 
 
+_ONE_PAIR = np.zeros((1, 2), dtype=np.int64)
+
+
+def _one_pair(points0: np.ndarray, points1: np.ndarray, code: int, limit: float) -> float:
+    """Return the distance of one pair of kernel point arrays through the pairwise kernel."""
+    bounds0 = np.array([0, points0.shape[0]], dtype=np.int64)
+    bounds1 = np.array([0, points1.shape[0]], dtype=np.int64)
+    return float(_pairwise_kernel(points0, bounds0, points1, bounds1, _ONE_PAIR, code, limit)[0])
+
+
 def _kernel_points(polyline: Polyline) -> np.ndarray:
     """Return a polyline's vertices as the one array type the kernels are compiled for.
 
@@ -242,14 +252,29 @@ def _kernel_points(polyline: Polyline) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  # pragma: no cover
-    """Return the restricted distances of concatenated polyline pairs (mode code)."""
+    """Return the (restricted) Hausdorff distances of concatenated polyline pairs.
+
+    ``mode`` 0: no restriction; 1: ``"vertex"``; 2: ``"projection"``. A pair's search
+    stops as soon as its best distance exceeds ``limit`` (a lower bound above ``limit``).
+    The one entry point of the module's distances: each extra compiled layer costs its
+    own optimisation and cache pass at first use.
+    """
     distances = np.empty(pairs.shape[0])
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
-        # Leading-axis slices of C arrays stay C arrays: the same specialisation.
-        distances[p] = _restricted_kernel(
-            points0[bounds0[a] : bounds0[a + 1]], points1[bounds1[b] : bounds1[b + 1]], mode, limit
-        )
+        # Leading-axis slices of C arrays stay C arrays: one specialisation.
+        cut0 = points0[bounds0[a] : bounds0[a + 1]]
+        cut1 = points1[bounds1[b] : bounds1[b + 1]]
+        if cut0.shape[0] == 0 or cut1.shape[0] == 0:
+            distances[p] = math.inf
+            continue
+        if mode == 2:
+            whole0 = cut0
+            if cut0.shape[0] >= 2:
+                cut0, _ = _projection_cut(cut0, cut1)
+            if cut1.shape[0] >= 2:
+                cut1, _ = _projection_cut(cut1, whole0)
+        distances[p] = _branch_and_bound(cut0, cut1, mode == 1, limit)
     return distances
 
 
@@ -278,7 +303,7 @@ def _segment_table(points):  # pragma: no cover - compiled
     return table
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _to_segment(px, py, table, k):  # pragma: no cover - compiled
     """Return ``(distance, t)`` from a point to segment ``k`` of ``table``.
 
@@ -306,16 +331,21 @@ def _distance_rows(points, table):  # pragma: no cover - compiled
     return rows
 
 
-@numba.njit(cache=True, inline="always")
-def _row_min(row, first, stop):  # pragma: no cover - compiled
-    """Return the minimum of ``row[first:stop]`` and its first position (from ``first``)."""
-    best = row[first]
-    where = 0
-    for k in range(first + 1, stop):
-        if row[k] < best:
-            best = row[k]
-            where = k - first
-    return best, where
+@numba.njit(cache=True)
+def _row_minima(rows, first, stop):  # pragma: no cover - compiled
+    """Return each row's minimum over columns ``[first, stop)`` and its first position.
+
+    Positions count from ``first``.
+    """
+    minima = np.empty(rows.shape[0])
+    where = np.empty(rows.shape[0], np.int64)
+    for v in range(rows.shape[0]):
+        best, nearest = rows[v, first], 0
+        for k in range(first + 1, stop):
+            if rows[v, k] < best:
+                best, nearest = rows[v, k], k - first
+        minima[v], where[v] = best, nearest
+    return minima, where
 
 
 @numba.njit(cache=True)
@@ -324,7 +354,10 @@ def _span_of_rows(rows):  # pragma: no cover - compiled
     low = rows.shape[1]
     high = -1
     for v in range(rows.shape[0]):
-        _, nearest = _row_min(rows[v], 0, rows.shape[1])
+        nearest = 0  # the lowest on ties
+        for k in range(1, rows.shape[1]):
+            if rows[v, k] < rows[v, nearest]:
+                nearest = k
         low = min(low, nearest)
         high = max(high, nearest)
     return low, high + 1
@@ -364,8 +397,13 @@ def _projection_cut(points0, points1):  # pragma: no cover - compiled
                 fractions[v] = t
         segment = segments[v]
         positions[v] = arc[segment] + fractions[v] * (arc[segment + 1] - arc[segment])
-    first = np.argmin(positions)
-    last = np.argmax(positions)
+    # The first smallest and first largest position (as argmin and argmax).
+    first, last = 0, 0
+    for v in range(1, count):
+        if positions[v] < positions[first]:
+            first = v
+        if positions[v] > positions[last]:
+            last = v
     start, stop = positions[first], positions[last]
     inside = 0
     if stop > start:
@@ -392,26 +430,6 @@ def _projection_cut(points0, points1):  # pragma: no cover - compiled
                     vertices[written, 1] = points0[k, 1]
                     sources[written] = k
     return vertices, sources
-
-
-@numba.njit(cache=True)
-def _restricted_kernel(points0, points1, mode, limit):  # pragma: no cover - compiled
-    """Return the (restricted) Hausdorff distance of two polylines as continuous curves.
-
-    ``mode`` 0: no restriction; 1: ``"vertex"``; 2: ``"projection"``. Returns as soon as
-    the best distance found exceeds ``limit`` (then a lower bound above ``limit``).
-    """
-    if points0.shape[0] == 0 or points1.shape[0] == 0:
-        return math.inf
-    cut0, cut1 = points0, points1
-    if mode == 2:
-        if points0.shape[0] >= 2:
-            cut0, _ = _projection_cut(points0, points1)
-        if points1.shape[0] >= 2:
-            cut1, _ = _projection_cut(points1, points0)
-    # One call site with a run-time flag: a literal argument would compile the (large)
-    # branch and bound a second time, specialised on the literal.
-    return _branch_and_bound(cut0, cut1, mode == 1, limit)
 
 
 @numba.njit(cache=True)
@@ -444,23 +462,21 @@ def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no
         low0, high0 = _span_of_rows(to0)
         low1, high1 = _span_of_rows(to1)
         first1, stop1, first0, stop0 = low1, high1, low0, high0
-    nearest0 = np.empty(count0)
-    argmin0 = np.empty(count0, np.int64)
-    for v in range(count0):
-        nearest0[v], argmin0[v] = _row_min(to1[v], first1, stop1)
-    nearest1 = np.empty(count1)
-    argmin1 = np.empty(count1, np.int64)
-    for v in range(count1):
-        nearest1[v], argmin1[v] = _row_min(to0[v], first0, stop0)
-    best = max(nearest0[low0 : high0 + 1].max(), nearest1[low1 : high1 + 1].max())
+    nearest0, argmin0 = _row_minima(to1, first1, stop1)
+    nearest1, argmin1 = _row_minima(to0, first0, stop0)
+    best = -math.inf
+    for v in range(low0, high0 + 1):
+        best = max(best, nearest0[v])
+    for v in range(low1, high1 + 1):
+        best = max(best, nearest1[v])
     if best > limit:
         return best
     # A piece of an edge: its ends, the distances there to the target segments, their
     # minima, and which polyline it belongs to. An edge whose ends have the same nearest
     # segment is settled from the start (its bound is the larger end value, already in
     # ``best``), so it is not even a piece.
-    widths = (stop1 - first1, stop0 - first0)
-    width = max(widths[0], widths[1])
+    width0, width1 = stop1 - first1, stop0 - first0
+    width = max(width0, width1)
     count = 0
     for v in range(low0, high0):
         count += argmin0[v] != argmin0[v + 1]
@@ -478,13 +494,16 @@ def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no
         argmins = argmin0 if side == 0 else argmin1
         nearest = nearest0 if side == 0 else nearest1
         first = first1 if side == 0 else first0
-        low, high = (low0, high0) if side == 0 else (low1, high1)
+        size = width0 if side == 0 else width1
+        low = low0 if side == 0 else low1
+        high = high0 if side == 0 else high1
         for v in range(low, high):
             if argmins[v] != argmins[v + 1]:
                 ends[piece, 0], ends[piece, 1] = points[v, 0], points[v, 1]
                 ends[piece, 2], ends[piece, 3] = points[v + 1, 0], points[v + 1, 1]
-                lows[piece, : widths[side]] = rows[v, first : first + widths[side]]
-                highs[piece, : widths[side]] = rows[v + 1, first : first + widths[side]]
+                for k in range(size):
+                    lows[piece, k] = rows[v, first + k]
+                    highs[piece, k] = rows[v + 1, first + k]
                 values[piece, 0], values[piece, 1] = nearest[v], nearest[v + 1]
                 sides[piece] = side
                 piece += 1
@@ -493,16 +512,21 @@ def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no
         middles = np.empty((count, 2))
         distances = np.empty((count, width))
         minima = np.empty(count)
-        open_ = np.zeros(count, np.bool_)
+        open_ = np.empty(count, np.bool_)
         found = False
         round_best = best
         kept = 0
         for p in range(count):
+            open_[p] = False
             side = sides[p]
-            size = widths[side]
+            size = width0 if side == 0 else width1
             fa, fb = values[p, 0], values[p, 1]
-            _, i = _row_min(lows[p], 0, size)
-            _, j = _row_min(highs[p], 0, size)
+            i, j = 0, 0  # the segments nearest to the ends (the lowest on ties)
+            for k in range(1, size):
+                if lows[p, k] < lows[p, i]:
+                    i = k
+                if highs[p, k] < highs[p, j]:
+                    j = k
             # Chord of d_i runs from fa to end_i; chord of d_j from start_j to fb.
             end_i, start_j = highs[p, i], lows[p, j]
             lead = start_j - fa
@@ -520,7 +544,10 @@ def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no
             first = first1 if side == 0 else first0
             for k in range(size):
                 distances[p, k], _ = _to_segment(mx, my, table, first + k)
-            minima[p], _ = _row_min(distances[p], 0, size)
+            minimum = distances[p, 0]
+            for k in range(1, size):
+                minimum = min(minimum, distances[p, k])
+            minima[p] = minimum
             round_best = max(round_best, minima[p])
             # A piece whose new point comes within the tolerance of its bound is settled:
             # with linear distances (segment interiors) the chord crossing is the maximum.
@@ -542,21 +569,19 @@ def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no
         for p in range(count):
             if not open_[p]:
                 continue
-            for half in range(2):
-                next_sides[q] = sides[p]
-                if half == 0:
-                    next_ends[q, 0], next_ends[q, 1] = ends[p, 0], ends[p, 1]
-                    next_ends[q, 2], next_ends[q, 3] = middles[p, 0], middles[p, 1]
-                    next_lows[q] = lows[p]
-                    next_highs[q] = distances[p]
-                    next_values[q, 0], next_values[q, 1] = values[p, 0], minima[p]
-                else:
-                    next_ends[q, 0], next_ends[q, 1] = middles[p, 0], middles[p, 1]
-                    next_ends[q, 2], next_ends[q, 3] = ends[p, 2], ends[p, 3]
-                    next_lows[q] = distances[p]
-                    next_highs[q] = highs[p]
-                    next_values[q, 0], next_values[q, 1] = minima[p], values[p, 1]
-                q += 1
+            # The halves [start, middle] and [middle, end].
+            next_sides[q] = next_sides[q + 1] = sides[p]
+            next_ends[q, 0], next_ends[q, 1] = ends[p, 0], ends[p, 1]
+            next_ends[q, 2], next_ends[q, 3] = middles[p, 0], middles[p, 1]
+            next_ends[q + 1, 0], next_ends[q + 1, 1] = middles[p, 0], middles[p, 1]
+            next_ends[q + 1, 2], next_ends[q + 1, 3] = ends[p, 2], ends[p, 3]
+            for k in range(width):
+                next_lows[q, k] = lows[p, k]
+                next_highs[q, k] = next_lows[q + 1, k] = distances[p, k]
+                next_highs[q + 1, k] = highs[p, k]
+            next_values[q, 0], next_values[q, 1] = values[p, 0], minima[p]
+            next_values[q + 1, 0], next_values[q + 1, 1] = minima[p], values[p, 1]
+            q += 2
         ends, lows, highs, values, sides, count = (
             next_ends, next_lows, next_highs, next_values, next_sides, 2 * kept
         )
