@@ -107,11 +107,17 @@ def _distinct(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
 
     Each vertex is compared with the one before it in the input.
     """
+    return points[_distinct_mask(points)]
+
+
+@numba.njit(cache=True)
+def _distinct_mask(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Return which of ``points`` :func:`_distinct` keeps."""
     keep = np.ones(points.shape[0], dtype=np.bool_)
     for k in range(1, points.shape[0]):
         dx, dy = points[k, 0] - points[k - 1, 0], points[k, 1] - points[k - 1, 1]
         keep[k] = dx * dx + dy * dy > DUPLICATE_DISTANCE**2
-    return points[keep]
+    return keep
 
 
 @numba.njit(cache=True)
@@ -909,10 +915,7 @@ def _distinct_weighted(
     points: np.ndarray, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Return :func:`_distinct` of ``points`` and the weights of the edges left."""
-    keep = np.ones(points.shape[0], dtype=np.bool_)
-    for k in range(1, points.shape[0]):
-        dx, dy = points[k, 0] - points[k - 1, 0], points[k, 1] - points[k - 1, 1]
-        keep[k] = dx * dx + dy * dy > DUPLICATE_DISTANCE**2
+    keep = _distinct_mask(points)
     # A repeated vertex ends a zero-length edge: that edge goes with it.
     return points[keep], weights[keep[1:]]
 
