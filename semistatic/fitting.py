@@ -99,7 +99,8 @@ def total_least_squares(points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if points.shape[0] < 2:
         raise ValueError(f"total_least_squares: needs at least 2 points, got {points.shape[0]}")
-    mx, my, dx, dy = _fit(points[:, 0], points[:, 1], 0, points.shape[0] - 1, 0.0, 0.0)
+    x, y = points[:, 0], points[:, 1]
+    mx, my, dx, dy = _fit(x, y, x, 0, points.shape[0] - 1, 0.0, 0.0)  # plain: no ranges read
     if dx == 0.0 and dy == 0.0:
         raise ValueError("total_least_squares: all points are equal, no line is defined")
     return np.array([mx, my]), np.array([dx, dy])
@@ -223,32 +224,32 @@ def fit_polylines(
 
 
 @numba.njit(cache=True)
-def _weight(px, py, bx, by):  # pragma: no cover - compiled
+def _weight(px, py, norm, bx, by):  # pragma: no cover - compiled
     """Return a reading's weight in a fit along the beams to a line along ``(bx, by)``.
 
-    ``1 / sine^2`` of the beam's incidence on the line (the sine at least
-    ``MIN_BEAM_SINE``); 1 when no direction is given (``bx = by = 0``): a plain fit.
+    ``(px, py)`` is the reading, ``norm`` its range; the weight is ``1 / sine^2`` of the
+    beam's incidence on the line (the sine at least ``MIN_BEAM_SINE``), or 1 when no
+    direction is given (``bx = by = 0``): a plain fit.
     """
     if bx == 0.0 and by == 0.0:
         return 1.0
-    norm = math.hypot(px, py)
     sine = abs(px * by - py * bx) / norm if norm > 0.0 else 1.0
     return 1.0 / max(sine, MIN_BEAM_SINE) ** 2
 
 
 @numba.njit(cache=True)
-def _fit(x, y, first, last, bx, by):  # pragma: no cover - compiled
+def _fit(x, y, norms, first, last, bx, by):  # pragma: no cover - compiled
     """Return ``(mx, my, dx, dy)``: centroid and principal direction of readings first..last.
 
-    Each reading is weighted by :func:`_weight` against ``(bx, by)``; ``(0, 0)`` gives the
-    plain total least squares fit (every weight exactly 1, so bit for bit the unweighted
-    sums).
+    Each reading is weighted by :func:`_weight` (its range in ``norms``) against
+    ``(bx, by)``; ``(0, 0)`` gives the plain total least squares fit (every weight exactly
+    1, so bit for bit the unweighted sums; ``norms`` is then not read).
     """
     total = 0.0
     mx = 0.0
     my = 0.0
     for k in range(first, last + 1):
-        weight = _weight(x[k], y[k], bx, by)
+        weight = _weight(x[k], y[k], norms[k], bx, by)
         total += weight
         mx += weight * x[k]
         my += weight * y[k]
@@ -258,7 +259,7 @@ def _fit(x, y, first, last, bx, by):  # pragma: no cover - compiled
     sxy = 0.0
     syy = 0.0
     for k in range(first, last + 1):
-        weight = _weight(x[k], y[k], bx, by)
+        weight = _weight(x[k], y[k], norms[k], bx, by)
         u = x[k] - mx
         v = y[k] - my
         sxx += weight * u * u
@@ -271,19 +272,20 @@ def _fit(x, y, first, last, bx, by):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _fit_rays(x, y, first, last):  # pragma: no cover - compiled
+def _fit_rays(x, y, norms, first, last):  # pragma: no cover - compiled
     """Return ``(mx, my, dx, dy)``: the line through readings first..last along their beams.
 
-    A reading's range error lies along its beam, so its distance from the line is that
-    error times the sine of the beam's incidence on the line. Total least squares with
-    each squared distance weighted by 1 / sine^2 (the sines taken on the unweighted fit's
-    line, at least ``MIN_BEAM_SINE``) minimises the squared errors along the beams: the
-    maximum-likelihood line under range noise, and PLE's ray-wise metric.
+    A reading's range error lies along its beam (``norms`` holds the ranges), so its
+    distance from the line is that error times the sine of the beam's incidence on the
+    line. Total least squares with each squared distance weighted by 1 / sine^2 (the sines
+    taken on the unweighted fit's line, at least ``MIN_BEAM_SINE``) minimises the squared
+    errors along the beams: the maximum-likelihood line under range noise, and PLE's
+    ray-wise metric.
     """
-    mx, my, dx, dy = _fit(x, y, first, last, 0.0, 0.0)
+    mx, my, dx, dy = _fit(x, y, norms, first, last, 0.0, 0.0)
     if dx == 0.0 and dy == 0.0:
         return mx, my, dx, dy
-    cx, cy, ex, ey = _fit(x, y, first, last, dx, dy)
+    cx, cy, ex, ey = _fit(x, y, norms, first, last, dx, dy)
     if ex == 0.0 and ey == 0.0:
         return mx, my, dx, dy
     return cx, cy, ex, ey
@@ -317,7 +319,7 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
     step = math.hypot(ex, ey)
     if norm == 0.0 or step == 0.0 or abs(px * ey - py * ex) / (norm * step) >= MIXED_PIXEL_SINE:
         return False
-    mx, my, dx, dy = _fit(x, y, low, high, 0.0, 0.0)
+    mx, my, dx, dy = _fit(x, y, x, low, high, 0.0, 0.0)  # plain: no ranges read
     sine = (px * dy - py * dx) / norm
     if sine == 0.0:
         return False
@@ -329,6 +331,10 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
     count = corners.size
+    # The readings' ranges, once: every fit along the beams weighs each reading by them.
+    norms = np.empty(x.size)
+    for k in range(x.size):
+        norms[k] = math.hypot(x[k], y[k])
     out = np.empty((count, 2))
     kept = np.empty(count, np.int64)
     lines = np.empty(count, np.int64)
@@ -344,7 +350,7 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
         size = 1
         merged[0] = corners[start]
         for j in range(start + 1, stop):
-            mx, my, dx, dy = _fit_rays(x, y, merged[size - 1], corners[j + 1])
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1])
             if _max_distance(x, y, merged[size - 1], corners[j + 1], mx, my, dx, dy) > epsilon:
                 merged[size] = corners[j]
                 size += 1
@@ -360,7 +366,7 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
                 merged[k] = merged[k + 1]
             size -= 1
         for edge in range(size - 1):
-            mx, my, dx, dy = _fit_rays(x, y, merged[edge], merged[edge + 1])
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1])
             fits[edge, 0] = mx
             fits[edge, 1] = my
             fits[edge, 2] = dx
