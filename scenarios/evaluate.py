@@ -136,7 +136,7 @@ def main_evaluate(args: argparse.Namespace) -> int:
     paper_epsilon, paper = at_vertex_count(scans, params, vertices, method="paper")
     print(f"  paper's pipeline at equal vertex count ({paper.vertices_per_scan:.1f}/scan, "
           f"tolerance {100 * paper_epsilon:.2f} cm): RMSE {100 * paper.rmse:.2f} cm; the "
-          f"default is {100 * (1.0 - ours.rmse / paper.rmse):.0f} % below")
+          f"default is {100 * (1.0 - ours.rmse / paper.rmse):.1f} % below")
     reference = published_log(name)
     if reference is not None:
         print(f"  published (Schaefer et al. 2018) at {vertices:.1f} vertices/scan: "

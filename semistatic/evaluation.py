@@ -332,9 +332,9 @@ def at_vertex_count(
     >>> angles = np.radians(np.arange(-60.0, 61.0, 1.0))
     >>> scan = Scan(ranges=2.0 / np.cos(angles) + 0.02 * np.sin(7 * angles),
     ...             angle_min=angles[0], angle_increment=np.radians(1.0))
-    >>> epsilon, score = at_vertex_count([scan], MapperParams(), 4.0, method="default")
+    >>> epsilon, score = at_vertex_count([scan], MapperParams(), 6.0, method="default")
     >>> score.vertices_per_scan
-    4.0
+    6.0
     """
     if method not in EXTRACTORS:
         raise ValueError(

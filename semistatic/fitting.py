@@ -1,12 +1,18 @@
-"""Fitted polyline vertices: total-least-squares edges between Douglas-Peucker corners.
+"""Fitted polyline vertices: edges fitted along the beams between Douglas-Peucker corners.
 
 Douglas-Peucker decides *where* a polyline bends; its vertices are raw readings, i.e. the
 noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polyline` keeps the
 corners but moves the vertices onto the surface the readings describe:
 
-1. each edge (the readings between two consecutive corners, both included) is fitted by
-   total least squares (the principal axis of its readings);
-2. adjacent edges are merged while one line fits all their readings within the tolerance
+1. each edge (the readings between two consecutive corners, both included) is fitted
+   along the beams: a reading's range error lies along its beam, so its distance from the
+   line is that error times the sine of the beam's incidence on the line; total least
+   squares with each squared distance weighted by 1 / sine^2 (sines from the plain total
+   least squares line, at least sin 10 deg; one reweighting step) minimises the squared
+   errors along the rays, the maximum-likelihood line under range noise. Grazing
+   readings, whose noise runs mostly along the surface, place the line best (on the ACES
+   log: PLE's ray-wise RMSE 2.99 -> 2.96 cm; real revisits intel 4.27 -> 4.19 cm);
+2. adjacent edges are merged while one such line fits all their readings within the tolerance
    (the merge step of split-and-merge): noise makes Douglas-Peucker cut straight walls;
    an end edge made of the end reading alone (one step past the last corner) is dropped
    when that reading is a *mixed pixel* (:func:`is_mixed_pixel`): reached by a step
@@ -93,7 +99,8 @@ def total_least_squares(points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     points = np.asarray(points, dtype=float).reshape(-1, 2)
     if points.shape[0] < 2:
         raise ValueError(f"total_least_squares: needs at least 2 points, got {points.shape[0]}")
-    mx, my, dx, dy = _fit(points[:, 0], points[:, 1], 0, points.shape[0] - 1)
+    x, y = points[:, 0], points[:, 1]
+    mx, my, dx, dy = _fit(x, y, x, 0, points.shape[0] - 1, 0.0, 0.0)  # plain: no ranges read
     if dx == 0.0 and dy == 0.0:
         raise ValueError("total_least_squares: all points are equal, no line is defined")
     return np.array([mx, my]), np.array([dx, dy])
@@ -217,29 +224,71 @@ def fit_polylines(
 
 
 @numba.njit(cache=True)
-def _fit(x, y, first, last):  # pragma: no cover - compiled
-    """Return ``(mx, my, dx, dy)``: centroid and principal direction of readings first..last."""
-    count = last - first + 1
+def _weight(px, py, norm, bx, by):  # pragma: no cover - compiled
+    """Return a reading's weight in a fit along the beams to a line along ``(bx, by)``.
+
+    ``(px, py)`` is the reading, ``norm`` its range; the weight is ``1 / sine^2`` of the
+    beam's incidence on the line (the sine at least ``MIN_BEAM_SINE``), or 1 when no
+    direction is given (``bx = by = 0``): a plain fit.
+    """
+    if bx == 0.0 and by == 0.0:
+        return 1.0
+    sine = abs(px * by - py * bx) / norm if norm > 0.0 else 1.0
+    return 1.0 / max(sine, MIN_BEAM_SINE) ** 2
+
+
+@numba.njit(cache=True)
+def _fit(x, y, norms, first, last, bx, by):  # pragma: no cover - compiled
+    """Return ``(mx, my, dx, dy)``: centroid and principal direction of readings first..last.
+
+    Each reading is weighted by :func:`_weight` (its range in ``norms``) against
+    ``(bx, by)``; ``(0, 0)`` gives the plain total least squares fit (every weight exactly
+    1, so bit for bit the unweighted sums; ``norms`` is then not read).
+    """
+    total = 0.0
     mx = 0.0
     my = 0.0
     for k in range(first, last + 1):
-        mx += x[k]
-        my += y[k]
-    mx /= count
-    my /= count
+        weight = _weight(x[k], y[k], norms[k], bx, by)
+        total += weight
+        mx += weight * x[k]
+        my += weight * y[k]
+    mx /= total
+    my /= total
     sxx = 0.0
     sxy = 0.0
     syy = 0.0
     for k in range(first, last + 1):
+        weight = _weight(x[k], y[k], norms[k], bx, by)
         u = x[k] - mx
         v = y[k] - my
-        sxx += u * u
-        sxy += u * v
-        syy += v * v
+        sxx += weight * u * u
+        sxy += weight * u * v
+        syy += weight * v * v
     if sxx + syy == 0.0:
         return mx, my, 0.0, 0.0
     angle = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
     return mx, my, math.cos(angle), math.sin(angle)
+
+
+@numba.njit(cache=True)
+def _fit_rays(x, y, norms, first, last):  # pragma: no cover - compiled
+    """Return ``(mx, my, dx, dy)``: the line through readings first..last along their beams.
+
+    A reading's range error lies along its beam (``norms`` holds the ranges), so its
+    distance from the line is that error times the sine of the beam's incidence on the
+    line. Total least squares with each squared distance weighted by 1 / sine^2 (the sines
+    taken on the unweighted fit's line, at least ``MIN_BEAM_SINE``) minimises the squared
+    errors along the beams: the maximum-likelihood line under range noise, and PLE's
+    ray-wise metric.
+    """
+    mx, my, dx, dy = _fit(x, y, norms, first, last, 0.0, 0.0)
+    if dx == 0.0 and dy == 0.0:
+        return mx, my, dx, dy
+    cx, cy, ex, ey = _fit(x, y, norms, first, last, dx, dy)
+    if ex == 0.0 and ey == 0.0:
+        return mx, my, dx, dy
+    return cx, cy, ex, ey
 
 
 @numba.njit(cache=True)
@@ -270,7 +319,7 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
     step = math.hypot(ex, ey)
     if norm == 0.0 or step == 0.0 or abs(px * ey - py * ex) / (norm * step) >= MIXED_PIXEL_SINE:
         return False
-    mx, my, dx, dy = _fit(x, y, low, high)
+    mx, my, dx, dy = _fit(x, y, x, low, high, 0.0, 0.0)  # plain: no ranges read
     sine = (px * dy - py * dx) / norm
     if sine == 0.0:
         return False
@@ -282,6 +331,10 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
     count = corners.size
+    # The readings' ranges, once: every fit along the beams weighs each reading by them.
+    norms = np.empty(x.size)
+    for k in range(x.size):
+        norms[k] = math.hypot(x[k], y[k])
     out = np.empty((count, 2))
     kept = np.empty(count, np.int64)
     lines = np.empty(count, np.int64)
@@ -297,7 +350,7 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
         size = 1
         merged[0] = corners[start]
         for j in range(start + 1, stop):
-            mx, my, dx, dy = _fit(x, y, merged[size - 1], corners[j + 1])
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1])
             if _max_distance(x, y, merged[size - 1], corners[j + 1], mx, my, dx, dy) > epsilon:
                 merged[size] = corners[j]
                 size += 1
@@ -313,7 +366,7 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
                 merged[k] = merged[k + 1]
             size -= 1
         for edge in range(size - 1):
-            mx, my, dx, dy = _fit(x, y, merged[edge], merged[edge + 1])
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1])
             fits[edge, 0] = mx
             fits[edge, 1] = my
             fits[edge, 2] = dx

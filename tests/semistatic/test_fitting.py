@@ -58,9 +58,23 @@ def test_an_inner_vertex_lands_nearer_the_true_corner_than_the_raw_reading():
     assert fitted < 0.6 * raw
 
 
+MIN_SINE = np.sin(np.radians(10.0))
+
+
+def ray_weighted_line(points):
+    """The line fitted along the beams: SVD, weights 1 / sine^2 of the SVD line's incidence."""
+    _, direction = svd_line(points)
+    sines = np.abs(points[:, 0] * direction[1] - points[:, 1] * direction[0]) / np.hypot(*points.T)
+    weights = 1.0 / np.maximum(sines, MIN_SINE) ** 2
+    centroid = weights @ points / weights.sum()
+    _, _, rows = np.linalg.svd(np.sqrt(weights)[:, None] * (points - centroid))
+    return centroid, rows[0]
+
+
 def expected_end_vertex(edge, epsilon):
-    """The end vertex of ``edge`` (readings, the end reading first) by SVD and a 2x2 solve."""
-    centroid, direction = svd_line(edge)
+    """The end vertex of ``edge`` (readings, the end reading first) by weighted SVD and a 2x2
+    solve."""
+    centroid, direction = ray_weighted_line(edge)
     reading = edge[0]
     # beam: t * reading = centroid + s * direction
     t, _ = np.linalg.solve(np.column_stack((reading, -direction)), centroid)
@@ -238,3 +252,26 @@ def test_is_mixed_pixel_rejects_positions_that_are_not_an_end_step():
         is_mixed_pixel(points, end=1, corner=2, far=0)
     with pytest.raises(ValueError, match="lie in"):
         is_mixed_pixel(points, end=4, corner=3, far=0)
+
+
+def test_a_wall_seen_obliquely_is_fitted_along_the_beams():
+    # range noise lies along the beams: a wall seen from 10 to 80 deg incidence has its
+    # grazing readings' noise mostly along the wall, and the fit that weights them by
+    # 1 / sine^2 errs less along the rays than plain total least squares
+    angles = np.radians(np.arange(10.0, 81.0, 1.0))
+    beams = np.column_stack((np.cos(angles), np.sin(angles)))
+    ranges = 2.0 / beams[:, 1]  # the wall y = 2
+    fitted_rms, plain_rms = [], []
+    for seed in range(30):
+        noisy = ranges + np.random.default_rng(seed).normal(0.0, 0.02, ranges.size)
+        points = noisy[:, None] * beams
+        vertices, _ = fit_polyline(points, [0, points.shape[0] - 1], 0.1)
+        for rms, (origin, direction) in (
+            (fitted_rms, (vertices[0], vertices[1] - vertices[0])),
+            (plain_rms, total_least_squares(points)),
+        ):
+            # each beam's crossing with the line against the true wall's
+            t = (origin[0] * direction[1] - origin[1] * direction[0]) / (
+                beams[:, 0] * direction[1] - beams[:, 1] * direction[0])
+            rms.append(np.sqrt(np.mean((t - ranges) ** 2)))
+    assert np.mean(fitted_rms) < 0.9 * np.mean(plain_rms)  # measured: 0.80
