@@ -56,7 +56,8 @@ from numpy.typing import ArrayLike
 
 from semistatic.association import associate_with_distances
 from semistatic.extraction import extract_polylines
-from semistatic.merge import END_TOLERANCE_FACTOR, join, merge_observations
+from semistatic.join import join
+from semistatic.merge import END_TOLERANCE_FACTOR, merge_observations
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.types import Scan

@@ -1,0 +1,89 @@
+"""Join (paper Sec. 3.4, DESIGN.md detail 8)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from semistatic.join import join, overlaps
+from semistatic.polyline import Polyline
+from tests.semistatic.conftest import NASTY_POLYLINES
+
+EPSILON = 0.03
+GATE = 0.12
+WALL = np.array([[0.0, 0.0], [3.0, 0.0]])
+BOX = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.6]])  # two faces of a box
+# Centimetre grid: repeated, collinear and folded vertices come up often.
+coordinates = st.integers(min_value=-500, max_value=500).map(lambda value: value / 100.0)
+polylines = st.lists(st.tuples(coordinates, coordinates), min_size=0, max_size=6).map(
+    lambda rows: np.array(rows, dtype=float).reshape(-1, 2)
+)
+
+
+@pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
+def test_nasty_polylines_go_through_join(name):
+    nasty = NASTY_POLYLINES[name]
+    groups = join([nasty, BOX, nasty + 10.0], GATE, EPSILON)
+    assert sorted(k for _, members in groups for k in members) == [0, 1, 2]
+
+
+def test_invalid_weights_are_rejected():
+    with pytest.raises(ValueError, match="weights"):
+        join([WALL, WALL], GATE, EPSILON, weights=[1.0])
+
+
+def test_overlaps():
+    assert overlaps(WALL, [[2.0, 0.03], [4.0, 0.03]], GATE, mode="projection")
+    assert not overlaps(WALL, [[3.05, 0.0], [4.0, 0.0]], GATE, mode="projection")  # a gap
+    assert not overlaps(BOX[:2], BOX[1:], GATE)  # two faces meeting at a corner
+    assert not overlaps(WALL, WALL + np.array([0.0, 0.5]), GATE)  # parallel, too far
+    assert overlaps([[1.0, 0.05]], WALL, GATE, mode="projection")  # a point inside
+    # The vertex restriction cannot shorten a two-vertex wall to a point's neighbourhood.
+    assert not overlaps([[1.0, 0.05]], WALL, GATE, mode="vertex")
+    assert not overlaps([[4.0, 0.0]], WALL, GATE, mode="projection")
+    assert overlaps([[1.0, 0.0]], [[1.0, 0.05]], GATE)
+    assert not overlaps(np.empty((0, 2)), WALL, GATE)
+
+
+def test_join_merges_overlapping_pieces_and_keeps_the_rest():
+    piece = Polyline([[2.5, 0.02], [4.0, 0.02]])
+    far = Polyline([[0.0, 5.0], [1.0, 5.0]])
+    groups = join([WALL, far, piece], GATE, EPSILON, mode="projection")
+    assert [members for _, members in groups] == [(0, 2), (1,)]
+    joined, untouched = groups[0][0], groups[1][0]
+    assert untouched is far
+    assert joined.points[0, 0] == pytest.approx(0.0)
+    assert joined.points[-1, 0] == pytest.approx(4.0)
+
+
+def test_join_keeps_the_heavier_polyline_in_place():
+    shifted = WALL + np.array([0.0, 0.06])
+    light_first = join([shifted, WALL], GATE, EPSILON, weights=[1.0, 99.0])
+    np.testing.assert_allclose(light_first[0][0].points[:, 1], 0.0006, atol=1e-12)
+
+
+def test_join_only_tests_pairs_with_a_candidate():
+    duplicate = WALL + np.array([0.0, 0.01])
+    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[])) == 2
+    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[1])) == 1
+
+
+def test_join_chains_groups_and_handles_empty_input():
+    pieces = [[[0.0, 0.0], [1.2, 0.0]], [[1.0, 0.01], [2.2, 0.01]], [[2.0, 0.0], [3.0, 0.0]]]
+    groups = join(pieces, GATE, EPSILON, mode="projection")
+    assert len(groups) == 1
+    assert groups[0][1] == (0, 1, 2)
+    assert groups[0][0].length == pytest.approx(3.0, abs=0.01)
+    assert join([], GATE, EPSILON) == []
+
+
+@settings(max_examples=40, deadline=None)
+@given(lines=st.lists(polylines, max_size=5))
+def test_join_partitions_its_input(lines):
+    groups = join(lines, GATE, EPSILON, mode="projection")
+    members = sorted(k for _, group in groups for k in group)
+    assert members == list(range(len(lines)))
+    for line, _ in groups:
+        assert np.all(np.isfinite(line.points))
