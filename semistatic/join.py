@@ -18,17 +18,18 @@ True
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.association import box_gaps
 from semistatic.hausdorff import restricted_hausdorff
 from semistatic.merge import distinct_vertices, merge, project_onto
 from semistatic.polyline import Polyline, as_polyline
 
-__all__ = ["MIN_OVERLAP", "join", "overlaps"]
+__all__ = ["MIN_OVERLAP", "join", "merge_group", "overlapping_groups", "overlaps"]
 
 # Two polylines' extents overlap when the projections of one onto the other span more
 # than this (m): end-to-end pieces that merely touch (a box's two faces at their corner)
@@ -103,11 +104,11 @@ def join(
 ) -> list[tuple[Polyline, tuple[int, ...]]]:
     """Join overlapping polylines into one (paper Sec. 3.4, DESIGN.md detail 8).
 
-    Every pair that :func:`overlaps` is linked; each connected group is merged into its
-    heaviest member (:func:`merge`, weights adding up as members are merged in, heaviest
-    first). The paper finds overlapping pairs by a linear scan of the viewpoint-sorted
-    list, i.e. among neighbours; here all pairs whose bounding boxes are within ``gate``
-    are tested, which finds those and overlaps between non-neighbours too.
+    Every pair that :func:`overlaps` is linked (:func:`overlapping_groups`); each
+    connected group is merged into its heaviest member (:func:`merge_group`). The paper
+    finds overlapping pairs by a linear scan of the viewpoint-sorted list, i.e. among
+    neighbours; here all pairs whose bounding boxes are within ``gate`` are tested, which
+    finds those and overlaps between non-neighbours too.
 
     Parameters
     ----------
@@ -147,12 +148,57 @@ def join(
         raise ValueError(
             f"join: weights needs one value per polyline ({count}), got shape {np.shape(weight)}"
         )
-    changed = [True] * count
+    changed = np.ones(count, dtype=bool)
     if candidates is not None:
-        changed = [False] * count
-        for k in np.asarray(candidates, dtype=np.int64).reshape(-1).tolist():
-            changed[k] = True
-    parent = list(range(count))
+        changed[:] = False
+        changed[np.asarray(candidates, dtype=np.int64).reshape(-1)] = True
+    boxes = np.array([line.box for line in lines], dtype=np.float64).reshape(count, 4)
+    groups = overlapping_groups(lines, boxes, changed, gate, mode)
+    joined = {members[0]: (merge_group(lines, weight, members, epsilon), tuple(members))
+              for members in groups}
+    grouped = {k for members in groups for k in members}
+    return [
+        joined.get(k, (line, (k,)))
+        for k, line in enumerate(lines)
+        if k in joined or k not in grouped
+    ]
+
+
+def overlapping_groups(
+    polylines: Sequence[Polyline],
+    boxes: np.ndarray,
+    changed: np.ndarray,
+    gate: float,
+    mode: str = "vertex",
+) -> list[list[int]]:
+    """Return the groups of two or more polylines linked by :func:`overlaps`.
+
+    Only pairs with at least one ``changed`` member whose ``boxes`` (``(K, 4)``, as
+    :func:`semistatic.association.bounding_boxes`) are within ``gate`` of each other are
+    tested: a pair farther apart cannot pass the gate.
+
+    Returns
+    -------
+    list of list of int
+        The sorted member indices of each group, groups ordered by their first member.
+
+    Examples
+    --------
+    >>> lines = [Polyline([[0.0, 0.0], [2.0, 0.0]]), Polyline([[1.5, 0.02], [3.0, 0.02]])]
+    >>> boxes = np.array([line.box for line in lines])
+    >>> overlapping_groups(lines, boxes, np.array([False, True]), 0.12, "projection")
+    [[0, 1]]
+    >>> overlapping_groups(lines, boxes, np.array([False, False]), 0.12, "projection")
+    []
+    """
+    first, second = _changed_near_pairs(
+        np.ascontiguousarray(boxes, dtype=np.float64),
+        np.ascontiguousarray(changed, dtype=np.bool_),
+        float(gate),
+    )
+    if not first.size:
+        return []
+    parent = list(range(len(polylines)))
 
     def root(k: int) -> int:
         while parent[k] != k:
@@ -160,32 +206,59 @@ def join(
             k = parent[k]
         return k
 
-    if count > 1:
-        boxes = np.array([line.box for line in lines], dtype=np.float64)
-        near = (box_gaps(boxes, boxes) <= gate).tolist()
-        # Pairs with a changed member only; the components do not depend on the order.
-        pairs = sorted(
-            (min(a, b), max(a, b))
-            for a in range(count)
-            if changed[a]
-            for b in range(count)
-            if b != a and near[a][b] and (b > a or not changed[b])
-        )
-        for a, b in pairs:
-            if root(a) != root(b) and overlaps(lines[a], lines[b], gate, mode):
-                parent[root(b)] = root(a)
+    # The components do not depend on the order in which the pairs are linked.
+    for a, b in zip(first.tolist(), second.tolist(), strict=True):
+        if root(a) != root(b) and overlaps(polylines[a], polylines[b], gate, mode):
+            parent[root(b)] = root(a)
     groups: dict[int, list[int]] = {}
-    for k in range(count):
+    for k in sorted({*first.tolist(), *second.tolist()}):
         groups.setdefault(root(k), []).append(k)
-    joined = []
-    for members in sorted(groups.values()):
-        if len(members) == 1:
-            joined.append((lines[members[0]], (members[0],)))
-            continue
-        by_weight = sorted(members, key=lambda k: (-weight[k], k))
-        result, total = lines[by_weight[0]], float(weight[by_weight[0]])
-        for k in by_weight[1:]:
-            result = merge(result, lines[k], epsilon, map_weight=total / max(weight[k], 1e-12))
-            total += float(weight[k])
-        joined.append((result, tuple(members)))
-    return joined
+    return sorted(members for members in groups.values() if len(members) > 1)
+
+
+@numba.njit(cache=True)
+def _changed_near_pairs(boxes, changed, gate):  # pragma: no cover - compiled
+    """Return the pairs ``a < b`` (lexicographic) with a changed member, boxes within gate.
+
+    The gap is :func:`semistatic.association.box_gaps`'s: Euclidean between the boxes,
+    0 where they touch, infinite for an empty box (never near).
+    """
+    count = boxes.shape[0]
+    first = np.empty(count * (count - 1) // 2 + 1, np.int64)
+    second = np.empty(first.size, np.int64)
+    found = 0
+    for a in range(count):
+        for b in range(a + 1, count):
+            if not (changed[a] or changed[b]):
+                continue
+            if boxes[a, 0] > boxes[a, 2] or boxes[b, 0] > boxes[b, 2]:
+                continue  # an empty box
+            across = max(boxes[a, 0] - boxes[b, 2], boxes[b, 0] - boxes[a, 2], 0.0)
+            along = max(boxes[a, 1] - boxes[b, 3], boxes[b, 1] - boxes[a, 3], 0.0)
+            if math.hypot(across, along) <= gate:
+                first[found], second[found] = a, b
+                found += 1
+    return first[:found], second[:found]
+
+
+def merge_group(
+    polylines: Sequence[Polyline], weights: Sequence[float], members: Sequence[int],
+    epsilon: float,
+) -> Polyline:
+    """Return the polylines ``members`` merged into one, heaviest first (:func:`merge`).
+
+    Each is merged into the result so far with the weights added up, so that a heavy
+    polyline stays in place and a light one moves toward it; ties go to the lower index.
+
+    Examples
+    --------
+    >>> lines = [Polyline([[0.0, 0.06], [3.0, 0.06]]), Polyline([[0.0, 0.0], [3.0, 0.0]])]
+    >>> merge_group(lines, [1.0, 99.0], [0, 1], 0.03).points.round(4).tolist()
+    [[0.0, 0.0006], [3.0, 0.0006]]
+    """
+    by_weight = sorted(members, key=lambda k: (-weights[k], k))
+    result, total = polylines[by_weight[0]], float(weights[by_weight[0]])
+    for k in by_weight[1:]:
+        result = merge(result, polylines[k], epsilon, map_weight=total / max(weights[k], 1e-12))
+        total += float(weights[k])
+    return result

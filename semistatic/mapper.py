@@ -49,21 +49,23 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import NamedTuple
 
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-from semistatic.association import associate_with_distances
+from semistatic.association import associate_boxed, bounding_boxes
 from semistatic.extraction import extract_polylines
-from semistatic.join import join
+from semistatic.join import merge_group, overlapping_groups
 from semistatic.merge import END_TOLERANCE_FACTOR, merge_observations
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_boxes
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
     extend_all_ends,
+    free_space_cuts,
     missed_and_cut,
     missing_polylines,
 )
@@ -250,6 +252,7 @@ class PolylineMap:
         self._keep_box = keep_box
         self._entries: dict[int, MapPolyline] = {}
         self._next_id = 0
+        self._geometry_cache: _Geometry | None = None
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -372,9 +375,13 @@ class PolylineMap:
         cut_away = []
         if params.free_space_cut:
             merged = sorted(changed)
-            checked = missed_and_cut(self._polylines_of(merged), scan, pose, params)
+            cuts = free_space_cuts(self._polylines_of(merged), scan, pose, params)
             cut_away, pieces = self._cut(
-                {map_id: pieces for map_id, (_, pieces) in zip(merged, checked, strict=True)},
+                {
+                    map_id: pieces
+                    for map_id, pieces in zip(merged, cuts, strict=True)
+                    if pieces is not None
+                },
                 seen,
             )
             changed.update(pieces)  # new pieces may join others like any changed polyline
@@ -481,10 +488,12 @@ class PolylineMap:
         self, scan_lines: tuple[Polyline, ...], pose: np.ndarray
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
         """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
-        ids = list(self._entries)
-        triples = associate_with_distances(
+        ids, lines, boxes = self._geometry()
+        triples = associate_boxed(
             scan_lines,
-            [self._entries[map_id].polyline for map_id in ids],
+            bounding_boxes(scan_lines),
+            lines,
+            boxes,
             self.params.gate,
             viewpoint=pose,
             mode=self.params.hausdorff_restriction,
@@ -495,6 +504,26 @@ class PolylineMap:
         unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
         unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         return associated, unassociated, unpaired_ids
+
+    def _geometry(self) -> _Geometry:
+        """Return the ids, polylines and boxes of the map, computed once per map state.
+
+        Association and join need the boxes of every map polyline; between two updates
+        (and after an update that changed nothing) the same ones serve again.
+        """
+        cached = self._geometry_cache
+        if cached is not None and len(cached.ids) == len(self._entries) and all(
+            map_id == cached_id and entry.polyline is line
+            for (map_id, entry), cached_id, line in zip(
+                self._entries.items(), cached.ids, cached.lines, strict=True
+            )
+        ):
+            return cached
+        ids = list(self._entries)
+        lines = [entry.polyline for entry in self._entries.values()]
+        points, offsets = pack_vertices([line.points for line in lines])
+        self._geometry_cache = _Geometry(ids, lines, run_boxes(points, offsets))
+        return self._geometry_cache
 
     def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
@@ -599,20 +628,22 @@ class PolylineMap:
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
         if not changed:
             return []
-        ids = list(self._entries)
-        entries = [self._entries[map_id] for map_id in ids]
-        groups = join(
-            [entry.polyline for entry in entries],
+        ids, lines, boxes = self._geometry()
+        groups = overlapping_groups(
+            lines,
+            boxes,
+            np.array([map_id in changed for map_id in ids], dtype=bool),
             self.params.gate,
-            self.params.epsilon,
             self.join_mode,
-            weights=[min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries],
-            candidates=[k for k, map_id in enumerate(ids) if map_id in changed],
         )
+        if not groups:
+            return []
+        entries = [self._entries[map_id] for map_id in ids]
+        weights = [min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries]
+        epsilon = self.params.epsilon
         joined = []
-        for line, members in groups:
-            if len(members) == 1:
-                continue
+        for members in groups:
+            line = merge_group(lines, weights, members, epsilon)
             parts = [entries[k] for k in members]
             survivor = min(parts, key=lambda entry: entry.id)
             touched = any(part.id in changed for part in parts)
@@ -638,6 +669,14 @@ class PolylineMap:
                     del self._entries[part.id]
                     joined.append((part.id, survivor.id))
         return joined
+
+
+class _Geometry(NamedTuple):
+    """The map's ids, their polylines and the ``(K, 4)`` boxes of those, in map order."""
+
+    ids: list[int]
+    lines: list[Polyline]
+    boxes: np.ndarray
 
 
 def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:

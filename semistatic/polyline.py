@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_offsets"]
+__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_boxes", "run_offsets"]
 
 EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 """The bounding box of no points: farther than anything from everything."""
@@ -105,11 +105,11 @@ class Polyline:
         ``points`` must be a finite ``(N, 2)`` float64 array and ``scan_indices`` an
         ``(N,)`` int64 array, both owned by the new polyline (they are frozen in place).
         """
-        line = object.__new__(cls)
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        object.__setattr__(line, "points", points)
-        object.__setattr__(line, "scan_indices", scan_indices)
+        line = object.__new__(cls)
+        # The frozen dataclass's fields, set as __init__ would without its checks.
+        line.__dict__.update(points=points, scan_indices=scan_indices)
         return line
 
     @classmethod
@@ -124,20 +124,13 @@ class Polyline:
         """
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        starts = bounds[:-1]
-        boxes = [EMPTY_BOX] * len(starts)
-        if points.shape[0] and all(a < b for a, b in itertools.pairwise(bounds)):
-            low = np.minimum.reduceat(points, starts, axis=0).tolist()
-            high = np.maximum.reduceat(points, starts, axis=0).tolist()
-            boxes = [(*a, *b) for a, b in zip(low, high, strict=True)]
+        boxes = run_boxes(points, bounds).tolist()
         lines = []
         for (start, stop), box in zip(itertools.pairwise(bounds), boxes, strict=True):
             line = object.__new__(cls)
             line.__dict__.update(
-                points=points[start:stop], scan_indices=scan_indices[start:stop]
+                points=points[start:stop], scan_indices=scan_indices[start:stop], box=tuple(box)
             )
-            if box is not EMPTY_BOX:
-                line.__dict__["box"] = box
             lines.append(line)
         return lines
 
@@ -248,3 +241,30 @@ def pack_vertices(vertices: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarra
     offsets = run_offsets((array.shape[0] for array in vertices), len(vertices))
     points = np.concatenate(vertices) if vertices else np.empty((0, 2))
     return points, offsets
+
+
+def run_boxes(points: np.ndarray, offsets: Sequence[int] | np.ndarray) -> np.ndarray:
+    """Return the ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)`` of packed runs.
+
+    Run ``k`` is ``points[offsets[k]:offsets[k + 1]]`` (as :func:`pack_vertices` gives
+    them); an empty run has the empty box :data:`EMPTY_BOX`. One pass over all vertices,
+    however many polylines.
+
+    Examples
+    --------
+    >>> run_boxes(np.array([[0.0, 1.0], [2.0, -1.0], [5.0, 5.0]]), [0, 2, 2, 3])
+    array([[ 0., -1.,  2.,  1.],
+           [ inf,  inf, -inf, -inf],
+           [ 5.,  5.,  5.,  5.]])
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    boxes = np.empty((offsets.size - 1, 4))
+    boxes[:] = EMPTY_BOX
+    filled = offsets[1:] > offsets[:-1]
+    if filled.any():
+        # Each filled run reduces up to the next filled start: the empty runs between add
+        # nothing.
+        starts = offsets[:-1][filled]
+        boxes[filled, :2] = np.minimum.reduceat(points, starts, axis=0)
+        boxes[filled, 2:] = np.maximum.reduceat(points, starts, axis=0)
+    return boxes

@@ -50,6 +50,7 @@ __all__ = [
     "extend_all_ends",
     "extend_ends",
     "free_space_cut",
+    "free_space_cuts",
     "is_missing",
     "missed_and_cut",
     "missing_polylines",
@@ -358,14 +359,15 @@ def _mapper_view(scan: Scan, pose: ArrayLike, params: MapperParams) -> _View:
 
 
 def _beam_passes(
-    lines: Sequence[Polyline], view: _View, *, cut: bool
+    lines: Sequence[Polyline], view: _View, *, cut: bool, counted: bool = True
 ) -> tuple[list[BeamCounts], list[list[tuple[float, float]] | None]]:
     """Return each polyline's :class:`BeamCounts` and, with ``cut``, its remaining spans.
 
     One compiled pass over all polylines (:func:`_through_polylines`). The spans are the
     arc-length intervals :func:`free_space_cut` keeps, ``None`` where nothing is cut.
     Polylines of fewer than two vertices are cut nowhere; their counts come from
-    :func:`expected_ranges` on every beam.
+    :func:`expected_ranges` on every beam. Without ``counted`` the counts are left out
+    (an empty list).
     """
     if not lines:
         return [], []
@@ -378,10 +380,13 @@ def _beam_passes(
         scan.angle_increment, scan.range_min, view.limit, view.margin, view.epsilon,
         view.gate, cut,
     )
-    beam_counts, spans, stored = [], [], 0
+    beam_counts = [
+        BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view)
+        for line, row in zip(lines, counts.tolist(), strict=True)
+    ] if counted else []
+    spans, stored = [], 0
     pieces = pieces.tolist()
-    for line, row, number in zip(lines, counts.tolist(), piece_counts.tolist(), strict=True):
-        beam_counts.append(BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view))
+    for number in piece_counts.tolist():
         spans.append(None if number < 0 else pieces[stored : stored + number])
         stored += max(number, 0)
     return beam_counts, spans
@@ -630,6 +635,32 @@ def missed_and_cut(
             [line] if kept is None else [_arc_piece(line, low, high) for low, high in kept],
         )
         for line, number, kept in zip(polylines, counts, spans, strict=True)
+    ]
+
+
+def free_space_cuts(
+    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams
+) -> list[list[Polyline] | None]:
+    """Return :func:`free_space_cut` of many polylines in one compiled pass.
+
+    ``None`` stands for a polyline that is cut nowhere (where :func:`free_space_cut`
+    returns ``[polyline]``).
+
+    Examples
+    --------
+    >>> angles = np.arange(-0.4, 0.45, 0.1)
+    >>> ranges = 2.0 / np.cos(angles)
+    >>> ranges[5:7] = 4.0
+    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
+    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
+    >>> [None if pieces is None else len(pieces)
+    ...  for pieces in free_space_cuts([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
+    [2, None]
+    """
+    _, spans = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=True, counted=False)
+    return [
+        None if kept is None else [_arc_piece(line, low, high) for low, high in kept]
+        for line, kept in zip(polylines, spans, strict=True)
     ]
 
 

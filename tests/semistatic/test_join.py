@@ -87,3 +87,33 @@ def test_join_partitions_its_input(lines):
     assert members == list(range(len(lines)))
     for line, _ in groups:
         assert np.all(np.isfinite(line.points))
+
+
+def test_overlapping_groups_are_the_components_of_all_overlapping_pairs():
+    # Reference: every pair tested with overlaps, components by scipy's graph search.
+    from scipy.sparse.csgraph import connected_components
+
+    from semistatic.association import bounding_boxes
+    from semistatic.join import overlapping_groups
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        lines = []
+        for _ in range(rng.integers(1, 9)):
+            start = rng.uniform(0.0, 2.0, 2)
+            lines.append(Polyline(start + np.cumsum(rng.uniform(-0.4, 0.4, (3, 2)), axis=0)))
+        lines.append(Polyline(lines[0].points + 0.01))  # one sure overlap
+        count = len(lines)
+        linked = np.array([[a != b and overlaps(lines[a], lines[b], GATE, "projection")
+                            for b in range(count)] for a in range(count)])
+        _, labels = connected_components(linked, directed=False)
+        expected = sorted(
+            members for label in set(labels.tolist())
+            if len(members := np.flatnonzero(labels == label).tolist()) > 1
+        )
+        groups = overlapping_groups(lines, bounding_boxes(lines), np.ones(count, dtype=bool),
+                                    GATE, "projection")
+        assert groups == expected
+        # Unchanged polylines are not tested against each other.
+        assert overlapping_groups(lines, bounding_boxes(lines), np.zeros(count, dtype=bool),
+                                  GATE, "projection") == []
