@@ -483,12 +483,14 @@ def associate_boxed(
     *,
     viewpoint: ArrayLike | None = None,
     mode: str = "vertex",
+    map_vertices: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Return :func:`associate_with_distances` of polylines whose boxes are known.
 
     For callers that keep their polylines' :func:`bounding_boxes` (``(n, 4)`` and
     ``(m, 4)``), e.g. a map between updates: the polylines must be :class:`Polyline`
-    objects and ``gate > 0`` (neither is checked here).
+    objects and ``gate > 0`` (neither is checked here). ``map_vertices``, when given, is
+    :func:`semistatic.polyline.pack_vertices` of the map polylines (read, never written).
 
     Examples
     --------
@@ -509,7 +511,10 @@ def associate_boxed(
     scans = [scans[k] for k in rows.tolist()]
     candidates = [maps[k] for k in columns.tolist()]
     scan_points, scan_bounds = _concatenated(scans)
-    map_points, map_bounds = _concatenated(candidates)
+    if map_vertices is not None and len(candidates) == len(maps):
+        map_points, map_bounds = map_vertices  # every map polyline is a candidate
+    else:
+        map_points, map_bounds = _concatenated(candidates)
     if pose is None:
         ranks = np.arange(columns.size)
         clockwise = np.zeros(columns.size, dtype=np.bool_)

@@ -488,15 +488,17 @@ class PolylineMap:
         self, scan_lines: tuple[Polyline, ...], pose: np.ndarray
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
         """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
-        ids, lines, boxes = self._geometry()
+        geometry = self._geometry()
+        ids = geometry.ids
         triples = associate_boxed(
             scan_lines,
             bounding_boxes(scan_lines),
-            lines,
-            boxes,
+            geometry.lines,
+            geometry.boxes,
             self.params.gate,
             viewpoint=pose,
             mode=self.params.hausdorff_restriction,
+            map_vertices=(geometry.points, geometry.offsets),
         )
         associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
         paired_scans = {pair.scan_index for pair in associated}
@@ -506,7 +508,7 @@ class PolylineMap:
         return associated, unassociated, unpaired_ids
 
     def _geometry(self) -> _Geometry:
-        """Return the ids, polylines and boxes of the map, computed once per map state.
+        """Return the ids, polylines, vertices and boxes of the map, once per map state.
 
         Association and join need the boxes of every map polyline; between two updates
         (and after an update that changed nothing) the same ones serve again.
@@ -522,7 +524,7 @@ class PolylineMap:
         ids = list(self._entries)
         lines = [entry.polyline for entry in self._entries.values()]
         points, offsets = pack_vertices([line.points for line in lines])
-        self._geometry_cache = _Geometry(ids, lines, run_boxes(points, offsets))
+        self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
         return self._geometry_cache
 
     def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
@@ -628,7 +630,7 @@ class PolylineMap:
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
         if not changed:
             return []
-        ids, lines, boxes = self._geometry()
+        ids, lines, _, _, boxes = self._geometry()
         groups = overlapping_groups(
             lines,
             boxes,
@@ -672,11 +674,15 @@ class PolylineMap:
 
 
 class _Geometry(NamedTuple):
-    """The map's ids, their polylines and the ``(K, 4)`` boxes of those, in map order."""
+    """The map's ids and polylines in map order, their packed vertices and boxes."""
 
     ids: list[int]
     lines: list[Polyline]
+    points: np.ndarray
+    """All vertices one polyline after the other (:func:`pack_vertices`)."""
+    offsets: np.ndarray
     boxes: np.ndarray
+    """``(K, 4)`` bounding boxes."""
 
 
 def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:

@@ -134,6 +134,23 @@ class Polyline:
             lines.append(line)
         return lines
 
+    @classmethod
+    def _views(
+        cls, points: np.ndarray, bounds: list[int], scan_indices: Sequence[np.ndarray]
+    ) -> list[Polyline]:
+        """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid vertices.
+
+        As :meth:`_split`, but each polyline takes the read-only ``scan_indices[k]`` given
+        (e.g. those of the polyline whose vertices were copied and moved) and no box.
+        """
+        points.flags.writeable = False
+        lines = []
+        for start, stop, indices in zip(bounds, bounds[1:], scan_indices, strict=False):
+            line = object.__new__(cls)
+            line.__dict__.update(points=points[start:stop], scan_indices=indices)
+            lines.append(line)
+        return lines
+
     def __len__(self) -> int:
         return int(self.points.shape[0])
 

@@ -229,12 +229,11 @@ def extend_all_ends(
     origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
     points, offsets = pack_vertices([line.points for line in polylines])
     moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
-    bounds = offsets.tolist()
     # Finite vertices moved by a finite shift: nothing to check.
+    views = Polyline._views(points, offsets.tolist(), [line.scan_indices for line in polylines])
     return [
-        Polyline._trusted(points[bounds[k] : bounds[k + 1]], line.scan_indices) if shifted
-        else line
-        for k, (line, shifted) in enumerate(zip(polylines, moved.tolist(), strict=True))
+        view if shifted else line
+        for line, view, shifted in zip(polylines, views, moved.tolist(), strict=True)
     ]
 
 
