@@ -514,15 +514,11 @@ class PolylineMap:
         (and after an update that changed nothing) the same ones serve again.
         """
         cached = self._geometry_cache
-        if cached is not None and len(cached.ids) == len(self._entries) and all(
-            map_id == cached_id and entry.polyline is line
-            for (map_id, entry), cached_id, line in zip(
-                self._entries.items(), cached.ids, cached.lines, strict=True
-            )
-        ):
-            return cached
         ids = list(self._entries)
         lines = [entry.polyline for entry in self._entries.values()]
+        # (Polylines compare by identity: the same objects under the same ids.)
+        if cached is not None and cached.ids == ids and cached.lines == lines:
+            return cached
         points, offsets = pack_vertices([line.points for line in lines])
         self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
         return self._geometry_cache

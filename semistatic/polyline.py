@@ -17,10 +17,12 @@ True
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -122,14 +124,15 @@ class Polyline:
         as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
         all non-empty runs are found in one pass and cached as their :attr:`box`.
         """
+        # (The boxes first: the kernel is compiled for writeable arrays.)
+        boxes = map(tuple, run_boxes(points, bounds).tolist())
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        boxes = run_boxes(points, bounds).tolist()
         lines = []
-        for (start, stop), box in zip(itertools.pairwise(bounds), boxes, strict=True):
+        for start, stop, box in zip(bounds, bounds[1:], boxes, strict=False):
             line = object.__new__(cls)
             line.__dict__.update(
-                points=points[start:stop], scan_indices=scan_indices[start:stop], box=tuple(box)
+                points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
             )
             lines.append(line)
         return lines
@@ -255,7 +258,8 @@ def pack_vertices(vertices: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarra
     >>> points.shape, offsets
     ((3, 2), array([0, 2, 3]))
     """
-    offsets = run_offsets((array.shape[0] for array in vertices), len(vertices))
+    # (len is the row count: a map over arrays costs no generator frame per polyline.)
+    offsets = run_offsets(map(len, vertices), len(vertices))
     points = np.concatenate(vertices) if vertices else np.empty((0, 2))
     return points, offsets
 
@@ -264,8 +268,8 @@ def run_boxes(points: np.ndarray, offsets: Sequence[int] | np.ndarray) -> np.nda
     """Return the ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)`` of packed runs.
 
     Run ``k`` is ``points[offsets[k]:offsets[k + 1]]`` (as :func:`pack_vertices` gives
-    them); an empty run has the empty box :data:`EMPTY_BOX`. One pass over all vertices,
-    however many polylines.
+    them); an empty run has the empty box :data:`EMPTY_BOX`. One compiled pass over all
+    vertices, however many polylines.
 
     Examples
     --------
@@ -275,13 +279,18 @@ def run_boxes(points: np.ndarray, offsets: Sequence[int] | np.ndarray) -> np.nda
            [ 5.,  5.,  5.,  5.]])
     """
     offsets = np.asarray(offsets, dtype=np.int64)
-    boxes = np.empty((offsets.size - 1, 4))
-    boxes[:] = EMPTY_BOX
-    filled = offsets[1:] > offsets[:-1]
-    if filled.any():
-        # Each filled run reduces up to the next filled start: the empty runs between add
-        # nothing.
-        starts = offsets[:-1][filled]
-        boxes[filled, :2] = np.minimum.reduceat(points, starts, axis=0)
-        boxes[filled, 2:] = np.maximum.reduceat(points, starts, axis=0)
+    return _run_boxes(points, offsets).reshape(-1, 4)
+
+
+@numba.njit(cache=True)
+def _run_boxes(points, offsets):  # pragma: no cover - compiled
+    """Return the boxes of :func:`run_boxes`, flat (four values per run)."""
+    boxes = np.empty(4 * (offsets.size - 1))
+    for run in range(offsets.size - 1):
+        xmin, ymin, xmax, ymax = math.inf, math.inf, -math.inf, -math.inf
+        for k in range(offsets[run], offsets[run + 1]):
+            xmin, xmax = min(xmin, points[k, 0]), max(xmax, points[k, 0])
+            ymin, ymax = min(ymin, points[k, 1]), max(ymax, points[k, 1])
+        boxes[4 * run], boxes[4 * run + 1] = xmin, ymin
+        boxes[4 * run + 2], boxes[4 * run + 3] = xmax, ymax
     return boxes

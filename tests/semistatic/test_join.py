@@ -117,3 +117,11 @@ def test_overlapping_groups_are_the_components_of_all_overlapping_pairs():
         # Unchanged polylines are not tested against each other.
         assert overlapping_groups(lines, bounding_boxes(lines), np.zeros(count, dtype=bool),
                                   GATE, "projection") == []
+
+
+def test_join_does_not_link_polylines_with_empty_or_far_boxes():
+    empty = Polyline(np.empty((0, 2)))
+    near = Polyline(WALL + np.array([0.0, 0.05]))
+    far = Polyline(WALL + np.array([0.0, 0.5]))
+    groups = join([empty, WALL, far, near, empty], GATE, EPSILON, mode="projection")
+    assert [members for _, members in groups] == [(0,), (1, 3), (2,), (4,)]
