@@ -371,20 +371,21 @@ class PolylineMap:
             [scan_lines[index] for index in indices], scan.angle_increment, viewpoint=pose
         ), strict=True))
         changed = self._merge_associated(observed, associated, stamp)
-        seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
         cut_away = []
         if params.free_space_cut:
             merged = sorted(changed)
-            cuts = free_space_cuts(self._polylines_of(merged), scan, pose, params)
-            cut_away, pieces = self._cut(
-                {
-                    map_id: pieces
-                    for map_id, pieces in zip(merged, cuts, strict=True)
-                    if pieces is not None
-                },
-                seen,
-            )
-            changed.update(pieces)  # new pieces may join others like any changed polyline
+            cuts = {
+                map_id: pieces
+                for map_id, pieces in zip(
+                    merged, free_space_cuts(self._polylines_of(merged), scan, pose, params),
+                    strict=True,
+                )
+                if pieces is not None
+            }
+            if cuts:
+                seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
+                cut_away, pieces = self._cut(cuts, seen)
+                changed.update(pieces)  # new pieces may join others like any changed one
         changed.difference_update(cut_away)
         new_ids = self._insert_new(
             [observed[index] for index in unassociated if index in observed], stamp
@@ -624,7 +625,7 @@ class PolylineMap:
         return new_ids
 
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
-        if not changed:
+        if not changed or len(self._entries) < 2:
             return []
         ids, lines, _, _, boxes = self._geometry()
         groups = overlapping_groups(
