@@ -373,13 +373,15 @@ class PolylineMap:
         changed = self._merge_associated(observed, associated, stamp)
         cut_away = []
         if params.free_space_cut:
-            merged = sorted(changed)
+            # The join reads the same geometry unless the cut or an insertion changes it.
+            geometry = self._geometry()
+            which = [k for k, map_id in enumerate(geometry.ids) if map_id in changed]
             cuts = {
-                map_id: pieces
-                for map_id, pieces in zip(
-                    merged, free_space_cuts(self._polylines_of(merged), scan, pose, params),
-                    strict=True,
-                )
+                geometry.ids[k]: pieces
+                for k, pieces in zip(which, free_space_cuts(
+                    [geometry.lines[k] for k in which], scan, pose, params,
+                    packed=(geometry.points, geometry.offsets, which),
+                ), strict=True)
                 if pieces is not None
             }
             if cuts:

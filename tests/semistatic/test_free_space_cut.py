@@ -8,7 +8,7 @@ import shapely
 
 from semistatic.mapper import PolylineMap
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline
+from semistatic.polyline import Polyline, pack_vertices
 from semistatic.types import Scan
 from semistatic.visibility import (
     free_space_cut,
@@ -176,3 +176,9 @@ def test_many_polylines_are_cut_as_each_alone():
     cuts = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS)
     assert [cuts[k] for k in (0, 1, 3)] == [None, None, None]
     np.testing.assert_array_equal(np.array([piece.points for piece in cuts[2]]), pieces)
+    # The same from vertices packed already (a map's, with a polyline not checked).
+    points, offsets = pack_vertices([line.points for line in (WALL, far, point)])
+    packed = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS,
+                             packed=(points, offsets, [1, 2, 0, 1]))
+    assert [packed[k] for k in (0, 1, 3)] == [None, None, None]
+    np.testing.assert_array_equal(np.array([piece.points for piece in packed[2]]), pieces)

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.sparse.csgraph import connected_components
 
-from semistatic.join import join, overlaps
+from semistatic.association import bounding_boxes
+from semistatic.join import join, overlapping_groups, overlaps
 from semistatic.polyline import Polyline
 from tests.semistatic.conftest import NASTY_POLYLINES
 
@@ -91,11 +93,6 @@ def test_join_partitions_its_input(lines):
 
 def test_overlapping_groups_are_the_components_of_all_overlapping_pairs():
     # Reference: every pair tested with overlaps, components by scipy's graph search.
-    from scipy.sparse.csgraph import connected_components
-
-    from semistatic.association import bounding_boxes
-    from semistatic.join import overlapping_groups
-
     rng = np.random.default_rng(5)
     for _ in range(20):
         lines = []
