@@ -20,9 +20,10 @@ from semistatic.alignment import Alignment, AlignmentParams, align_points
 from semistatic.association import associate
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
+from semistatic.join import join
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, UpdateReport
-from semistatic.merge import join, merge
+from semistatic.merge import merge
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline, as_polyline
 from semistatic.similarity import similarity, tangent_function

@@ -61,6 +61,7 @@ from semistatic.similarity import similarity
 __all__ = [
     "FAR_COST",
     "associate",
+    "associate_boxed",
     "associate_with_distances",
     "bounding_boxes",
     "box_gaps",
@@ -428,8 +429,8 @@ def _forced_path(
     scan_bounds: np.ndarray,
     map_points: np.ndarray,
     map_bounds: np.ndarray,
-) -> list[tuple[int, int]] | None:
-    """Return the association path when the similarities cannot change it, else ``None``.
+) -> np.ndarray | None:
+    """Return the ``(P, 2)`` path when the similarities cannot change it, else ``None``.
 
     ``feasible`` marks the pairs that can pass the gate; the polylines are given as
     concatenated vertices with bounds (:func:`_concatenated`). A pair that cannot pass the
@@ -450,7 +451,7 @@ def _forced_path(
         np.ascontiguousarray(map_points, dtype=np.float64),
         map_bounds,
     )
-    return [(int(i), int(j)) for i, j in path] if forced else None
+    return path if forced else None
 
 
 def associate_with_distances(
@@ -482,16 +483,51 @@ def associate_with_distances(
     maps = [as_polyline(polyline) for polyline in map_polylines]
     if not scans or not maps:
         return []
+    return associate_boxed(scans, _boxes(scans), maps, _boxes(maps), gate,
+                           viewpoint=viewpoint, mode=mode)
+
+
+def associate_boxed(
+    scan_polylines: Sequence[Polyline],
+    scan_boxes: np.ndarray,
+    map_polylines: Sequence[Polyline],
+    map_boxes: np.ndarray,
+    gate: float,
+    *,
+    viewpoint: ArrayLike | None = None,
+    mode: str = "vertex",
+    map_vertices: tuple[np.ndarray, np.ndarray] | None = None,
+) -> list[tuple[int, int, float]]:
+    """Return :func:`associate_with_distances` of polylines whose boxes are known.
+
+    For callers that keep their polylines' :func:`bounding_boxes` (``(n, 4)`` and
+    ``(m, 4)``), e.g. a map between updates: the polylines must be :class:`Polyline`
+    objects and ``gate > 0`` (neither is checked here). ``map_vertices``, when given, is
+    :func:`semistatic.polyline.pack_vertices` of the map polylines (read, never written).
+
+    Examples
+    --------
+    >>> wall = Polyline([[2.0, -1.0], [2.0, 1.0]])
+    >>> boxes = bounding_boxes([wall])
+    >>> [(i, j, round(d, 3)) for i, j, d in associate_boxed([wall], boxes, [wall], boxes, 0.12)]
+    [(0, 0, 0.0)]
+    """
+    scans, maps = scan_polylines, map_polylines
+    if not scans or not maps:
+        return []
     pose = None if viewpoint is None else _viewpoint_pose(viewpoint)
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects.
-    near, rows, columns = _broad_phase(_boxes(scans), _boxes(maps), float(gate))
+    near, rows, columns = _broad_phase(scan_boxes, map_boxes, float(gate))
     if rows.size == 0:
         return []
     scans = [scans[k] for k in rows.tolist()]
     candidates = [maps[k] for k in columns.tolist()]
     scan_points, scan_bounds = _concatenated(scans)
-    map_points, map_bounds = _concatenated(candidates)
+    if map_vertices is not None and len(candidates) == len(maps):
+        map_points, map_bounds = map_vertices  # every map polyline is a candidate
+    else:
+        map_points, map_bounds = _concatenated(candidates)
     if pose is None:
         ranks = np.arange(columns.size)
         clockwise = np.zeros(columns.size, dtype=np.bool_)
@@ -513,17 +549,17 @@ def associate_with_distances(
             value = similarity(scans[a], ordered[b])
             if value < FAR_COST:
                 costs[a, b] = value
-        path = _optimal_path(costs)
+        path = np.array(_optimal_path(costs), dtype=np.int64).reshape(-1, 2)
     # Stops early above the gate: the value is then only a lower bound, but one that
     # fails the gate exactly when the full distance does.
-    pairs = _gateable(np.array(path, dtype=np.int64).reshape(-1, 2), feasible, scan_bounds,
-                      map_bounds)
+    pairs = _gateable(path, feasible, scan_bounds, map_bounds)
     distances = pairwise_restricted_hausdorff(
         scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=gate
-    )
+    ).tolist()
+    scan_index, map_index = rows[pairs[:, 0]].tolist(), order[pairs[:, 1]].tolist()
     return [
-        (int(rows[a]), int(order[b]), distance)
-        for (a, b), distance in zip(pairs.tolist(), distances.tolist(), strict=True)
+        (i, j, distance)
+        for i, j, distance in zip(scan_index, map_index, distances, strict=True)
         if distance <= gate
     ]
 

@@ -46,7 +46,7 @@ import shapely
 from numpy.typing import ArrayLike
 from shapely.geometry import mapping, shape
 
-from semistatic.frames import between, transform_points, untransform_points
+from semistatic.frames import compose, inverse, transform_points, untransform_points
 from semistatic.mapper import STATUSES, MapPolyline, PolylineMap, UpdateReport
 from semistatic.params import MapperParams
 from semistatic.polyline import EMPTY_BOX, Polyline
@@ -130,6 +130,9 @@ class LocalMap:
             raise ValueError(f"LocalMap: origin must be a finite (x, y, theta), got {origin}")
         origin.flags.writeable = False
         self.origin = origin
+        # to_local is between(origin, pose), i.e. compose(inverse(origin), pose): the
+        # inverse of the fixed origin is computed once.
+        self._world_in_local = inverse(origin)
         self.segment = segment
         self.safety_area = _area_union(safety_areas)
         self._area_box = (
@@ -218,7 +221,7 @@ class LocalMap:
         >>> LocalMap(origin=(1.0, 0.0, 0.0)).to_local((3.0, 1.0, 0.5))
         array([2. , 1. , 0.5])
         """
-        return between(self.origin, pose)
+        return compose(self._world_in_local, pose)
 
     def _touches_safety_area(self, polyline: Polyline) -> bool:
         if self.safety_area is None:

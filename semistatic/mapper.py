@@ -49,25 +49,23 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import NamedTuple
 
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-from semistatic.association import associate_with_distances
+from semistatic.association import associate_boxed, bounding_boxes
 from semistatic.extraction import extract_polylines
-from semistatic.merge import (
-    END_TOLERANCE_FACTOR,
-    join,
-    merge_weighted,
-    transfer_weights,
-)
+from semistatic.join import merge_group, overlapping_groups
+from semistatic.merge import END_TOLERANCE_FACTOR, merge_weighted, transfer_weights
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_boxes
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
     extend_all_ends,
+    free_space_cuts,
     missed_and_cut,
     missing_polylines,
 )
@@ -286,6 +284,7 @@ class PolylineMap:
         self._keep_box = keep_box
         self._entries: dict[int, MapPolyline] = {}
         self._next_id = 0
+        self._geometry_cache: _Geometry | None = None
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -405,16 +404,23 @@ class PolylineMap:
             [scan_lines[index] for index in indices], scan.angle_increment, viewpoint=pose
         ), strict=True))
         changed = self._merge_associated(observed, associated, stamp)
-        seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
         cut_away = []
         if params.free_space_cut:
-            merged = sorted(changed)
-            checked = missed_and_cut(self._polylines_of(merged), scan, pose, params)
-            cut_away, pieces = self._cut(
-                {map_id: pieces for map_id, (_, pieces) in zip(merged, checked, strict=True)},
-                seen,
-            )
-            changed.update(pieces)  # new pieces may join others like any changed polyline
+            # The join reads the same geometry unless the cut or an insertion changes it.
+            geometry = self._geometry()
+            which = [k for k, map_id in enumerate(geometry.ids) if map_id in changed]
+            cuts = {
+                geometry.ids[k]: pieces
+                for k, pieces in zip(which, free_space_cuts(
+                    [geometry.lines[k] for k in which], scan, pose, params,
+                    packed=(geometry.points, geometry.offsets, which),
+                ), strict=True)
+                if pieces is not None
+            }
+            if cuts:
+                seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
+                cut_away, pieces = self._cut(cuts, seen)
+                changed.update(pieces)  # new pieces may join others like any changed one
         changed.difference_update(cut_away)
         new_ids = self._insert_new(
             [observed[index] for index in unassociated if index in observed], stamp
@@ -518,13 +524,17 @@ class PolylineMap:
         self, scan_lines: tuple[Polyline, ...], pose: np.ndarray
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
         """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
-        ids = list(self._entries)
-        triples = associate_with_distances(
+        geometry = self._geometry()
+        ids = geometry.ids
+        triples = associate_boxed(
             scan_lines,
-            [self._entries[map_id].polyline for map_id in ids],
+            bounding_boxes(scan_lines),
+            geometry.lines,
+            geometry.boxes,
             self.params.gate,
             viewpoint=pose,
             mode=self.params.hausdorff_restriction,
+            map_vertices=(geometry.points, geometry.offsets),
         )
         associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
         paired_scans = {pair.scan_index for pair in associated}
@@ -532,6 +542,22 @@ class PolylineMap:
         unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
         unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         return associated, unassociated, unpaired_ids
+
+    def _geometry(self) -> _Geometry:
+        """Return the ids, polylines, vertices and boxes of the map, once per map state.
+
+        Association and join need the boxes of every map polyline; between two updates
+        (and after an update that changed nothing) the same ones serve again.
+        """
+        cached = self._geometry_cache
+        ids = list(self._entries)
+        lines = [entry.polyline for entry in self._entries.values()]
+        # (Polylines compare by identity: the same objects under the same ids.)
+        if cached is not None and cached.ids == ids and cached.lines == lines:
+            return cached
+        points, offsets = pack_vertices([line.points for line in lines])
+        self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
+        return self._geometry_cache
 
     def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
@@ -654,22 +680,24 @@ class PolylineMap:
         return new_ids
 
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
-        if not changed:
+        if not changed or len(self._entries) < 2:
             return []
-        ids = list(self._entries)
-        entries = [self._entries[map_id] for map_id in ids]
-        groups = join(
-            [entry.polyline for entry in entries],
+        ids, lines, _, _, boxes = self._geometry()
+        groups = overlapping_groups(
+            lines,
+            boxes,
+            np.array([map_id in changed for map_id in ids], dtype=bool),
             self.params.gate,
-            self.params.epsilon,
             self.join_mode,
-            weights=[min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries],
-            candidates=[k for k, map_id in enumerate(ids) if map_id in changed],
         )
+        if not groups:
+            return []
+        entries = [self._entries[map_id] for map_id in ids]
+        weights = [min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries]
+        epsilon = self.params.epsilon
         joined = []
-        for line, members in groups:
-            if len(members) == 1:
-                continue
+        for members in groups:
+            line = merge_group(lines, weights, members, epsilon)
             parts = [entries[k] for k in members]
             survivor = min(parts, key=lambda entry: entry.id)
             touched = any(part.id in changed for part in parts)
@@ -696,6 +724,18 @@ class PolylineMap:
                     del self._entries[part.id]
                     joined.append((part.id, survivor.id))
         return joined
+
+
+class _Geometry(NamedTuple):
+    """The map's ids and polylines in map order, their packed vertices and boxes."""
+
+    ids: list[int]
+    lines: list[Polyline]
+    points: np.ndarray
+    """All vertices one polyline after the other (:func:`pack_vertices`)."""
+    offsets: np.ndarray
+    boxes: np.ndarray
+    """``(K, 4)`` bounding boxes."""
 
 
 def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:

@@ -17,16 +17,18 @@ True
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_offsets"]
+__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_boxes", "run_offsets"]
 
 EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 """The bounding box of no points: farther than anything from everything."""
@@ -105,11 +107,11 @@ class Polyline:
         ``points`` must be a finite ``(N, 2)`` float64 array and ``scan_indices`` an
         ``(N,)`` int64 array, both owned by the new polyline (they are frozen in place).
         """
-        line = object.__new__(cls)
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        object.__setattr__(line, "points", points)
-        object.__setattr__(line, "scan_indices", scan_indices)
+        line = object.__new__(cls)
+        # The frozen dataclass's fields, set as __init__ would without its checks.
+        line.__dict__.update(points=points, scan_indices=scan_indices)
         return line
 
     @classmethod
@@ -122,22 +124,33 @@ class Polyline:
         as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
         all non-empty runs are found in one pass and cached as their :attr:`box`.
         """
+        # (The boxes first: the kernel is compiled for writeable arrays.)
+        boxes = map(tuple, run_boxes(points, bounds).tolist())
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        starts = bounds[:-1]
-        boxes = [EMPTY_BOX] * len(starts)
-        if points.shape[0] and all(a < b for a, b in itertools.pairwise(bounds)):
-            low = np.minimum.reduceat(points, starts, axis=0).tolist()
-            high = np.maximum.reduceat(points, starts, axis=0).tolist()
-            boxes = [(*a, *b) for a, b in zip(low, high, strict=True)]
         lines = []
-        for (start, stop), box in zip(itertools.pairwise(bounds), boxes, strict=True):
+        for start, stop, box in zip(bounds, bounds[1:], boxes, strict=False):
             line = object.__new__(cls)
             line.__dict__.update(
-                points=points[start:stop], scan_indices=scan_indices[start:stop]
+                points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
             )
-            if box is not EMPTY_BOX:
-                line.__dict__["box"] = box
+            lines.append(line)
+        return lines
+
+    @classmethod
+    def _views(
+        cls, points: np.ndarray, bounds: list[int], scan_indices: Sequence[np.ndarray]
+    ) -> list[Polyline]:
+        """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid vertices.
+
+        As :meth:`_split`, but each polyline takes the read-only ``scan_indices[k]`` given
+        (e.g. those of the polyline whose vertices were copied and moved) and no box.
+        """
+        points.flags.writeable = False
+        lines = []
+        for start, stop, indices in zip(bounds, bounds[1:], scan_indices, strict=False):
+            line = object.__new__(cls)
+            line.__dict__.update(points=points[start:stop], scan_indices=indices)
             lines.append(line)
         return lines
 
@@ -245,6 +258,39 @@ def pack_vertices(vertices: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarra
     >>> points.shape, offsets
     ((3, 2), array([0, 2, 3]))
     """
-    offsets = run_offsets((array.shape[0] for array in vertices), len(vertices))
+    # (len is the row count: a map over arrays costs no generator frame per polyline.)
+    offsets = run_offsets(map(len, vertices), len(vertices))
     points = np.concatenate(vertices) if vertices else np.empty((0, 2))
     return points, offsets
+
+
+def run_boxes(points: np.ndarray, offsets: Sequence[int] | np.ndarray) -> np.ndarray:
+    """Return the ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)`` of packed runs.
+
+    Run ``k`` is ``points[offsets[k]:offsets[k + 1]]`` (as :func:`pack_vertices` gives
+    them); an empty run has the empty box :data:`EMPTY_BOX`. One compiled pass over all
+    vertices, however many polylines.
+
+    Examples
+    --------
+    >>> run_boxes(np.array([[0.0, 1.0], [2.0, -1.0], [5.0, 5.0]]), [0, 2, 2, 3])
+    array([[ 0., -1.,  2.,  1.],
+           [ inf,  inf, -inf, -inf],
+           [ 5.,  5.,  5.,  5.]])
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    return _run_boxes(points, offsets).reshape(-1, 4)
+
+
+@numba.njit(cache=True)
+def _run_boxes(points, offsets):  # pragma: no cover - compiled
+    """Return the boxes of :func:`run_boxes`, flat (four values per run)."""
+    boxes = np.empty(4 * (offsets.size - 1))
+    for run in range(offsets.size - 1):
+        xmin, ymin, xmax, ymax = math.inf, math.inf, -math.inf, -math.inf
+        for k in range(offsets[run], offsets[run + 1]):
+            xmin, xmax = min(xmin, points[k, 0]), max(xmax, points[k, 0])
+            ymin, ymax = min(ymin, points[k, 1]), max(ymax, points[k, 1])
+        boxes[4 * run], boxes[4 * run + 1] = xmin, ymin
+        boxes[4 * run + 2], boxes[4 * run + 3] = xmax, ymax
+    return boxes

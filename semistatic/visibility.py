@@ -50,6 +50,7 @@ __all__ = [
     "extend_all_ends",
     "extend_ends",
     "free_space_cut",
+    "free_space_cuts",
     "is_missing",
     "missed_and_cut",
     "missing_polylines",
@@ -228,12 +229,11 @@ def extend_all_ends(
     origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
     points, offsets = pack_vertices([line.points for line in polylines])
     moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
-    bounds = offsets.tolist()
     # Finite vertices moved by a finite shift: nothing to check.
+    views = Polyline._views(points, offsets.tolist(), [line.scan_indices for line in polylines])
     return [
-        Polyline._trusted(points[bounds[k] : bounds[k + 1]], line.scan_indices) if shifted
-        else line
-        for k, (line, shifted) in enumerate(zip(polylines, moved.tolist(), strict=True))
+        view if shifted else line
+        for line, view, shifted in zip(polylines, views, moved.tolist(), strict=True)
     ]
 
 
@@ -358,30 +358,40 @@ def _mapper_view(scan: Scan, pose: ArrayLike, params: MapperParams) -> _View:
 
 
 def _beam_passes(
-    lines: Sequence[Polyline], view: _View, *, cut: bool
+    lines: Sequence[Polyline], view: _View, *, cut: bool, counted: bool = True,
+    packed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[BeamCounts], list[list[tuple[float, float]] | None]]:
     """Return each polyline's :class:`BeamCounts` and, with ``cut``, its remaining spans.
 
     One compiled pass over all polylines (:func:`_through_polylines`). The spans are the
     arc-length intervals :func:`free_space_cut` keeps, ``None`` where nothing is cut.
     Polylines of fewer than two vertices are cut nowhere; their counts come from
-    :func:`expected_ranges` on every beam.
+    :func:`expected_ranges` on every beam. Without ``counted`` the counts are left out
+    (an empty list). ``packed`` is ``(points, offsets, which)`` when the vertices of
+    ``lines`` are already packed: ``lines[k]`` is run ``which[k]``.
     """
     if not lines:
         return [], []
     scan = view.scan
-    points, offsets = pack_vertices([line.points for line in lines])
+    if packed is None:
+        points, offsets = pack_vertices([line.points for line in lines])
+        which = np.arange(len(lines))
+    else:
+        points, offsets, which = packed
     x, y, theta = np.asarray(view.pose, dtype=float).reshape(3).tolist()
     cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
     counts, piece_counts, pieces = _through_polylines(
-        points, offsets, x, y, theta, scan.ranges, cos, sin, scan.angle_min,
+        points, offsets, which, x, y, theta, scan.ranges, cos, sin, scan.angle_min,
         scan.angle_increment, scan.range_min, view.limit, view.margin, view.epsilon,
         view.gate, cut,
     )
-    beam_counts, spans, stored = [], [], 0
+    beam_counts = [
+        BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view)
+        for line, row in zip(lines, counts.tolist(), strict=True)
+    ] if counted else []
+    spans, stored = [], 0
     pieces = pieces.tolist()
-    for line, row, number in zip(lines, counts.tolist(), piece_counts.tolist(), strict=True):
-        beam_counts.append(BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view))
+    for number in piece_counts.tolist():
         spans.append(None if number < 0 else pieces[stored : stored + number])
         stored += max(number, 0)
     return beam_counts, spans
@@ -401,19 +411,20 @@ def _point_counts(line: Polyline, view: _View) -> BeamCounts:
 
 @numba.njit(cache=True)
 def _through_polylines(
-    points: np.ndarray, offsets: np.ndarray, pose_x: float, pose_y: float, pose_theta: float,
-    ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray, angle_min: float,
-    angle_increment: float, range_min: float, limit: float, margin: float, epsilon: float,
-    gate: float, cut: bool,
+    points: np.ndarray, offsets: np.ndarray, which: np.ndarray, pose_x: float, pose_y: float,
+    pose_theta: float, ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray,
+    angle_min: float, angle_increment: float, range_min: float, limit: float, margin: float,
+    epsilon: float, gate: float, cut: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Return the beam counts and free-space cuts of polylines packed in ``points``.
 
-    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]`` (map frame, sensor at
-    ``pose``). Returns ``(P, 3)`` counts (in view, unoccluded, seen through; zeros for
-    fewer than two vertices), ``(P,)`` piece counts (``-1``: not cut, always without
-    ``cut``) and the ``(K, 2)`` arc-length spans of the pieces, polyline after polyline.
+    The ``P`` polylines checked are ``points[offsets[w]:offsets[w + 1]]`` for each ``w``
+    in ``which`` (map frame, sensor at ``pose``). Returns ``(P, 3)`` counts (in view,
+    unoccluded, seen through; zeros for fewer than two vertices), ``(P,)`` piece counts
+    (``-1``: not cut, always without ``cut``) and the ``(K, 2)`` arc-length spans of the
+    pieces, polyline after polyline.
     """
-    count = offsets.size - 1
+    count = which.size
     beams = ranges.size
     counts = np.zeros((count, 3), np.int64)
     piece_counts = np.full(count, -1, np.int64)
@@ -424,7 +435,7 @@ def _through_polylines(
     spans = np.empty((beams, 2))
     c, s = math.cos(pose_theta), math.sin(pose_theta)
     for p in range(count):
-        start, size = offsets[p], offsets[p + 1] - offsets[p]
+        start, size = offsets[which[p]], offsets[which[p] + 1] - offsets[which[p]]
         if size < 2:
             continue
         xs, ys = np.empty(size), np.empty(size)
@@ -630,6 +641,39 @@ def missed_and_cut(
             [line] if kept is None else [_arc_piece(line, low, high) for low, high in kept],
         )
         for line, number, kept in zip(polylines, counts, spans, strict=True)
+    ]
+
+
+def free_space_cuts(
+    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams, *,
+    packed: tuple[np.ndarray, np.ndarray, ArrayLike] | None = None,
+) -> list[list[Polyline] | None]:
+    """Return :func:`free_space_cut` of many polylines in one compiled pass.
+
+    ``None`` stands for a polyline that is cut nowhere (where :func:`free_space_cut`
+    returns ``[polyline]``). ``packed`` is ``(points, offsets, which)`` when the
+    polylines' vertices are already packed (:func:`semistatic.polyline.pack_vertices`,
+    e.g. a whole map's): ``polylines[k]`` is run ``which[k]``.
+
+    Examples
+    --------
+    >>> angles = np.arange(-0.4, 0.45, 0.1)
+    >>> ranges = 2.0 / np.cos(angles)
+    >>> ranges[5:7] = 4.0
+    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
+    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
+    >>> [None if pieces is None else len(pieces)
+    ...  for pieces in free_space_cuts([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
+    [2, None]
+    """
+    if packed is not None:
+        points, offsets, which = packed
+        packed = (points, offsets, np.asarray(which, dtype=np.int64))
+    _, spans = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=True,
+                            counted=False, packed=packed)
+    return [
+        None if kept is None else [_arc_piece(line, low, high) for low, high in kept]
+        for line, kept in zip(polylines, spans, strict=True)
     ]
 
 

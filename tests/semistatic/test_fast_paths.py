@@ -245,10 +245,8 @@ def test_forced_path_needs_one_best_path():
     bounds = np.array([0, 2, 4])
     assert association_module._forced_path(two_ways, points, bounds, points, bounds) is None
     diagonal = np.eye(2, dtype=bool)
-    assert association_module._forced_path(diagonal, points, bounds, points, bounds) == [
-        (0, 0),
-        (1, 1),
-    ]
+    path = association_module._forced_path(diagonal, points, bounds, points, bounds)
+    assert path.tolist() == [[0, 0], [1, 1]]
 
 
 def test_a_typical_update_computes_no_similarity(monkeypatch):

@@ -8,9 +8,15 @@ import shapely
 
 from semistatic.mapper import PolylineMap
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline
+from semistatic.polyline import Polyline, pack_vertices
 from semistatic.types import Scan
-from semistatic.visibility import free_space_cut, is_missing, missed_and_cut, visible_beams
+from semistatic.visibility import (
+    free_space_cut,
+    free_space_cuts,
+    is_missing,
+    missed_and_cut,
+    visible_beams,
+)
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
 PARAMS = MapperParams()
@@ -166,3 +172,13 @@ def test_many_polylines_are_cut_as_each_alone():
     pieces = np.array([piece.points for piece in checked[2][1]])
     np.testing.assert_allclose(pieces, [[[2.0, -1.0], [2.0, low]], [[2.0, high], [2.0, 1.0]]],
                                atol=1e-12)
+    # free_space_cuts: the same pieces, None for the polylines cut nowhere.
+    cuts = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS)
+    assert [cuts[k] for k in (0, 1, 3)] == [None, None, None]
+    np.testing.assert_array_equal(np.array([piece.points for piece in cuts[2]]), pieces)
+    # The same from vertices packed already (a map's, with a polyline not checked).
+    points, offsets = pack_vertices([line.points for line in (WALL, far, point)])
+    packed = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS,
+                             packed=(points, offsets, [1, 2, 0, 1]))
+    assert [packed[k] for k in (0, 1, 3)] == [None, None, None]
+    np.testing.assert_array_equal(np.array([piece.points for piece in packed[2]]), pieces)

@@ -1,4 +1,4 @@
-"""Merge and join (paper Sec. 3.4, DESIGN.md details 7-8)."""
+"""Merge (paper Sec. 3.4, DESIGN.md detail 7)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,8 @@ from hypothesis import strategies as st
 from semistatic.hausdorff import hausdorff
 from semistatic.merge import (
     END_TOLERANCE_FACTOR,
-    join,
     merge,
     merge_weighted,
-    overlaps,
     project_onto,
     transfer_weights,
 )
@@ -115,13 +113,11 @@ def test_degenerate_inputs():
 
 
 @pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
-def test_nasty_polylines_go_through_merge_and_join(name):
+def test_nasty_polylines_go_through_merge(name):
     nasty = NASTY_POLYLINES[name]
     for old, new in ((nasty, BOX), (BOX, nasty), (nasty, nasty)):
         merged = merge(old, new, EPSILON)
         assert np.all(np.isfinite(merged.points))
-    groups = join([nasty, BOX, nasty + 10.0], GATE, EPSILON)
-    assert sorted(k for _, members in groups for k in members) == [0, 1, 2]
 
 
 def test_invalid_arguments_are_rejected():
@@ -133,8 +129,6 @@ def test_invalid_arguments_are_rejected():
         merge(WALL, WALL, EPSILON, end_tolerance=-1.0)
     with pytest.raises(ValueError, match="two distinct vertices"):
         project_onto([[0.0, 0.0]], [[1.0, 1.0], [1.0, 1.0]])
-    with pytest.raises(ValueError, match="weights"):
-        join([WALL, WALL], GATE, EPSILON, weights=[1.0])
 
 
 def test_projection_matches_shapely():
@@ -155,51 +149,6 @@ def test_before_and_after_flags():
     found = project_onto([[-1.0, 0.5], [4.0, 0.0], [1.0, 1.0], [3.0, 1.0], [0.0, 0.0]], WALL)
     assert found.before.tolist() == [True, False, False, False, True]
     assert found.after.tolist() == [False, True, False, True, False]
-
-
-def test_overlaps():
-    assert overlaps(WALL, [[2.0, 0.03], [4.0, 0.03]], GATE, mode="projection")
-    assert not overlaps(WALL, [[3.05, 0.0], [4.0, 0.0]], GATE, mode="projection")  # a gap
-    assert not overlaps(BOX[:2], BOX[1:], GATE)  # two faces meeting at a corner
-    assert not overlaps(WALL, WALL + np.array([0.0, 0.5]), GATE)  # parallel, too far
-    assert overlaps([[1.0, 0.05]], WALL, GATE, mode="projection")  # a point inside
-    # The vertex restriction cannot shorten a two-vertex wall to a point's neighbourhood.
-    assert not overlaps([[1.0, 0.05]], WALL, GATE, mode="vertex")
-    assert not overlaps([[4.0, 0.0]], WALL, GATE, mode="projection")
-    assert overlaps([[1.0, 0.0]], [[1.0, 0.05]], GATE)
-    assert not overlaps(np.empty((0, 2)), WALL, GATE)
-
-
-def test_join_merges_overlapping_pieces_and_keeps_the_rest():
-    piece = Polyline([[2.5, 0.02], [4.0, 0.02]])
-    far = Polyline([[0.0, 5.0], [1.0, 5.0]])
-    groups = join([WALL, far, piece], GATE, EPSILON, mode="projection")
-    assert [members for _, members in groups] == [(0, 2), (1,)]
-    joined, untouched = groups[0][0], groups[1][0]
-    assert untouched is far
-    assert joined.points[0, 0] == pytest.approx(0.0)
-    assert joined.points[-1, 0] == pytest.approx(4.0)
-
-
-def test_join_keeps_the_heavier_polyline_in_place():
-    shifted = WALL + np.array([0.0, 0.06])
-    light_first = join([shifted, WALL], GATE, EPSILON, weights=[1.0, 99.0])
-    np.testing.assert_allclose(light_first[0][0].points[:, 1], 0.0006, atol=1e-12)
-
-
-def test_join_only_tests_pairs_with_a_candidate():
-    duplicate = WALL + np.array([0.0, 0.01])
-    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[])) == 2
-    assert len(join([WALL, duplicate], GATE, EPSILON, candidates=[1])) == 1
-
-
-def test_join_chains_groups_and_handles_empty_input():
-    pieces = [[[0.0, 0.0], [1.2, 0.0]], [[1.0, 0.01], [2.2, 0.01]], [[2.0, 0.0], [3.0, 0.0]]]
-    groups = join(pieces, GATE, EPSILON, mode="projection")
-    assert len(groups) == 1
-    assert groups[0][1] == (0, 1, 2)
-    assert groups[0][0].length == pytest.approx(3.0, abs=0.01)
-    assert join([], GATE, EPSILON) == []
 
 
 # Centimetre grid: repeated, collinear and folded vertices come up often, and no
@@ -228,16 +177,6 @@ def test_merging_a_polyline_with_itself_keeps_its_simplified_shape(line):
     merged = merge(line, line, EPSILON, map_weight=3.0)
     if len(line) >= 2 and Polyline(line).length > 0.0:
         assert hausdorff(merged, line) <= EPSILON + 1e-9
-
-
-@settings(max_examples=40, deadline=None)
-@given(lines=st.lists(polylines, max_size=5))
-def test_join_partitions_its_input(lines):
-    groups = join(lines, GATE, EPSILON, mode="projection")
-    members = sorted(k for _, group in groups for k in group)
-    assert members == list(range(len(lines)))
-    for line, _ in groups:
-        assert np.all(np.isfinite(line.points))
 
 
 def test_a_moved_box_does_not_draw_a_diagonal_across_its_new_footprint():
@@ -291,7 +230,6 @@ def test_a_map_edge_cutting_a_corner_gives_way_to_the_corner_the_scans_see():
                      map_weight=float(hits))
     assert shapely.distance(CORNER, shapely.LineString(line.points)) < 0.01
     assert _farthest_from(BOX_OUTLINE, line) < 0.01
-
 
 
 # Per-edge weights (issue 10, Build item 4): two faces of a box, the first seen often.

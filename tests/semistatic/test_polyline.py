@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
+import shapely
 
 from semistatic.frames import inverse
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import EMPTY_BOX, Polyline, as_polyline, pack_vertices, run_boxes
 
 
 def test_defaults_and_dtypes():
@@ -71,3 +72,15 @@ def test_as_polyline_passes_polylines_through_and_wraps_arrays():
     assert isinstance(wrapped, Polyline)
     np.testing.assert_array_equal(wrapped.points, line.points)
     assert len(as_polyline([])) == 0
+
+
+def test_run_boxes_are_the_bounds_of_each_run():
+    rng = np.random.default_rng(3)
+    runs = [rng.normal(size=(int(rng.integers(0, 4)), 2)) for _ in range(30)]
+    points, offsets = pack_vertices(runs)
+    boxes = run_boxes(points, offsets)
+    for run, box in zip(runs, boxes.tolist(), strict=True):
+        if len(run) == 0:
+            assert tuple(box) == EMPTY_BOX
+        else:
+            assert box == shapely.bounds(shapely.multipoints(run)).tolist()
