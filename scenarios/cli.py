@@ -475,5 +475,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def console_main(argv: Sequence[str] | None = None) -> None:
+    """Entry point of the ``semistatic`` command: :func:`main`, then exit with its status.
+
+    After Ctrl-C the interpreter's own teardown is skipped (``os._exit``, once the output
+    is flushed and every result staged or cleaned up by :func:`main`): an interrupt that
+    lands while numba loads or compiles a kernel can leave a half-built llvmlite object
+    whose destructor then frees memory twice at exit (seen as "free(): double free
+    detected" after the one ``interrupted`` line).
+
+    Examples
+    --------
+    >>> try:
+    ...     console_main(["check", "pal1"])  # doctest: +ELLIPSIS
+    ... except SystemExit as done:
+    ...     print("exit status", done.code)
+    pal1: valid (...pal1.toml)
+    ...
+    exit status 0
+    """
+    status = main(argv)
+    if status == EXIT_INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()
