@@ -556,7 +556,9 @@ def _seen_through_spans(
                 k = found
                 while k > 0 and (spans[k - 1, 0] > low
                                  or (spans[k - 1, 0] == low and spans[k - 1, 1] > high)):
-                    spans[k] = spans[k - 1]
+                    # Element by element: a row assignment compiles numba's broadcasting
+                    # and its error formatting (1.5 s of a first run's compilation).
+                    spans[k, 0], spans[k, 1] = spans[k - 1, 0], spans[k - 1, 1]
                     k -= 1
                 spans[k, 0], spans[k, 1] = low, high
                 found += 1
