@@ -64,6 +64,7 @@ __all__ = [
     "associate_boxed",
     "associate_with_distances",
     "bounding_boxes",
+    "box_gap",
     "box_gaps",
     "orient_ccw",
     "similarity_matrix",
@@ -124,13 +125,23 @@ def _gap_kernel(boxes_a, boxes_b):  # pragma: no cover - compiled
     gaps = np.empty((boxes_a.shape[0], boxes_b.shape[0]))
     for k in range(boxes_a.shape[0]):
         for m in range(boxes_b.shape[0]):
-            gaps[k, m] = _box_gap(boxes_a, k, boxes_b, m)
+            gaps[k, m] = box_gap(boxes_a, k, boxes_b, m)
     return gaps
 
 
 @numba.njit(cache=True)
-def _box_gap(boxes_a, k, boxes_b, m):  # pragma: no cover - compiled
-    """Return the Euclidean gap between box ``k`` of ``boxes_a`` and box ``m`` of ``boxes_b``."""
+def box_gap(boxes_a, k, boxes_b, m):  # pragma: no cover - compiled
+    """Return the Euclidean gap between box ``k`` of ``boxes_a`` and box ``m`` of ``boxes_b``.
+
+    One entry of :func:`box_gaps`, compiled, for kernels that test pairs of boxes (rows
+    ``(xmin, ymin, xmax, ymax)``, ``inf`` for an empty box).
+
+    Examples
+    --------
+    >>> boxes = np.array([[0.0, 0.0, 1.0, 1.0], [4.0, 5.0, 6.0, 6.0]])
+    >>> box_gap(boxes, 0, boxes, 1)
+    5.0
+    """
     gap_x = max(boxes_a[k, 0] - boxes_b[m, 2], boxes_b[m, 0] - boxes_a[k, 2], 0.0)
     gap_y = max(boxes_a[k, 1] - boxes_b[m, 3], boxes_b[m, 1] - boxes_a[k, 3], 0.0)
     gap = math.hypot(gap_x, gap_y)
@@ -575,7 +586,7 @@ def _broad_phase(scan_boxes, map_boxes, gate):  # pragma: no cover - compiled
     for a in range(n):
         any_near = False
         for b in range(m):
-            near[a, b] = _box_gap(scan_boxes, a, map_boxes, b) <= gate
+            near[a, b] = box_gap(scan_boxes, a, map_boxes, b) <= gate
             any_near = any_near or near[a, b]
             columns[b] += near[a, b]
         if any_near:

@@ -18,13 +18,13 @@ True
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
+from semistatic.association import box_gap
 from semistatic.hausdorff import restricted_hausdorff
 from semistatic.merge import distinct_vertices, merge, project_onto
 from semistatic.polyline import Polyline, as_polyline
@@ -220,8 +220,8 @@ def overlapping_groups(
 def _changed_near_pairs(boxes, changed, gate):  # pragma: no cover - compiled
     """Return the pairs ``a < b`` (lexicographic) with a changed member, boxes within gate.
 
-    The gap is :func:`semistatic.association.box_gaps`'s: Euclidean between the boxes,
-    0 where they touch, infinite for an empty box (never near).
+    The gap is :func:`semistatic.association.box_gap`: Euclidean between the boxes, 0
+    where they touch, infinite for an empty box (never near).
     """
     count = boxes.shape[0]
     first = np.empty(count * (count - 1) // 2 + 1, np.int64)
@@ -231,11 +231,7 @@ def _changed_near_pairs(boxes, changed, gate):  # pragma: no cover - compiled
         for b in range(a + 1, count):
             if not (changed[a] or changed[b]):
                 continue
-            if boxes[a, 0] > boxes[a, 2] or boxes[b, 0] > boxes[b, 2]:
-                continue  # an empty box
-            across = max(boxes[a, 0] - boxes[b, 2], boxes[b, 0] - boxes[a, 2], 0.0)
-            along = max(boxes[a, 1] - boxes[b, 3], boxes[b, 1] - boxes[a, 3], 0.0)
-            if math.hypot(across, along) <= gate:
+            if box_gap(boxes, a, boxes, b) <= gate:
                 first[found], second[found] = a, b
                 found += 1
     return first[:found], second[:found]

@@ -617,7 +617,9 @@ def free_space_cut(
     ...  for piece in free_space_cut(wall, scan, (0.0, 0.0, 0.0), MapperParams())]
     [[[2.0, -1.0], [2.0, 0.1]], [[2.0, 0.512], [2.0, 1.0]]]
     """
-    return missed_and_cut([as_polyline(polyline)], scan, pose, params)[0][1]
+    line = as_polyline(polyline)
+    pieces = free_space_cuts([line], scan, pose, params)[0]
+    return [line] if pieces is None else pieces
 
 
 def missed_and_cut(
