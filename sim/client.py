@@ -7,9 +7,11 @@ process - the determinism tests run two of them.
 
 Time is fixed-step: ``step(n)`` advances the simulation by ``n * time_step`` seconds and
 ``sim_time`` counts them. The wall time spent inside PyBullet is accumulated in
-``engine_time_s``: stepping always, and other heavy calls (ray casts) when made inside
-``with sim.engine_timer():``. A run's report compares it to the total wall time to show
-that the engine, not our Python, dominates.
+``engine_time_s``: stepping always, and other calls when made inside
+``with sim.engine_timer():`` or timed inline by their callers (the ray casts, and the
+closed loop's per-tick calls: contact points, the robot's base and wheel states, its
+motor commands, the people's moves). A run's report compares it to the total wall time
+to show that the engine, not our Python, dominates.
 
 Examples
 --------

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import tempfile
+import time
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -211,6 +212,7 @@ class SimUGV:
         if not (math.isfinite(targets[0]) and math.isfinite(targets[1])):
             raise ValueError(f"SimUGV.set_wheel_speeds: speeds must be finite, got {left}, {right}")
         self._wheel_targets = np.array(targets)
+        start = time.perf_counter()
         self._motor_control_array(
             self.body_id,
             self._wheel_joint_list,
@@ -218,6 +220,7 @@ class SimUGV:
             targetVelocities=targets,
             forces=self._wheel_forces,
         )
+        self.sim.engine_time_s += time.perf_counter() - start
         return np.array(targets)
 
     def command(self, v: float, omega: float) -> np.ndarray:
@@ -269,7 +272,10 @@ class SimUGV:
 
     def _base_state(self) -> tuple[np.ndarray, np.ndarray]:
         """World position of ``base_link`` and the base rotation matrix."""
+        # Engine time, inline (the engine_timer context manager costs more than the call).
+        start = time.perf_counter()
         com, quaternion = self._base_position_and_orientation(self.body_id)
+        self.sim.engine_time_s += time.perf_counter() - start
         rotation = _rotation(quaternion)
         # numpy's (BLAS) matrix-vector product, not a Python sum: they round differently.
         return np.array(com) - rotation @ self._com_in_base, rotation
@@ -336,7 +342,9 @@ class SimUGV:
         ...     robot.wheel_angles().round(1)  # about 2 rad/s for 1 s, less the start-up
         array([1.9, 1.9])
         """
+        start = time.perf_counter()
         (left, *_), (right, *_) = self._joint_states(self.body_id, self._wheel_joint_list)
+        self.sim.engine_time_s += time.perf_counter() - start
         return np.array([left, right])
 
     def wheel_velocities(self) -> np.ndarray:
