@@ -453,9 +453,8 @@ class Vehicle:
 
     # ------------------------------------------------------------------ pieces
     def _predict(self) -> None:
-        encoders, ekf = self.encoders, self.ekf
-        increment = encoders.odometry_increment(self.body.wheel_angles())
-        ekf.predict(increment, encoders.increment_covariance(encoders.last_tick_deltas))
+        increment, covariance = self.encoders.read(self.body.wheel_angles())
+        self.ekf.predict(increment, covariance)
         self.odom_pose = compose(self.odom_pose, increment)
 
     def _scan(self, laser: RaycastLaser, mount) -> Scan:
@@ -467,8 +466,8 @@ class Vehicle:
         log = self.log
         log.stamps.append(self.bench.sim.sim_time)
         log.true_poses.append(self.body.true_pose())
-        log.estimated_poses.append(self.ekf.pose.copy())
-        log.covariances.append(self.ekf.covariance.copy())
+        log.estimated_poses.append(self.ekf.pose)  # the EKF returns copies
+        log.covariances.append(self.ekf.covariance)
 
     def _supervise_and_map(self, scan: Scan) -> ScanRecord:
         index = segment_index(self.segments, self.follower.progress)

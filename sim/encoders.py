@@ -176,6 +176,7 @@ class WheelEncoders:
         self._quantisation_variance = self._metres_per_tick**2 / 6.0
         # Counts as Python ints: the per-tick path does its arithmetic on floats and ints.
         self._ticks: tuple[int, int] | None = None
+        self._last_deltas = (0, 0)
         self.last_tick_deltas = np.zeros(2, dtype=np.int64)
 
     @property
@@ -217,6 +218,7 @@ class WheelEncoders:
         array([0., 0., 0.])
         """
         self._ticks = self._count(wheel_angles)
+        self._last_deltas = (0, 0)
         self.last_tick_deltas = np.zeros(2, dtype=np.int64)
 
     def wheel_travel(self, tick_deltas: ArrayLike) -> np.ndarray:
@@ -257,7 +259,8 @@ class WheelEncoders:
             )
         left_ticks, right_ticks = ticks[0] - self._ticks[0], ticks[1] - self._ticks[1]
         self._ticks = ticks
-        self.last_tick_deltas = np.array([left_ticks, right_ticks], dtype=np.int64)
+        self._last_deltas = (left_ticks, right_ticks)
+        self.last_tick_deltas = np.array(self._last_deltas, dtype=np.int64)
         # Python floats, the same operations as wheel_travel and arc_increment on arrays.
         left = left_ticks * self._metres_per_tick
         right = right_ticks * self._metres_per_tick
@@ -302,6 +305,27 @@ class WheelEncoders:
         0.000354
         """
         left_ticks, right_ticks = np.asarray(tick_deltas).tolist()
+        return self._covariance(left_ticks, right_ticks)
+
+    def read(self, wheel_angles: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Return :meth:`odometry_increment` and the :meth:`increment_covariance` of its ticks.
+
+        What the EKF's prediction takes, in one call (the closed loop's per-tick path).
+
+        Examples
+        --------
+        >>> from robots.presets import PIONEER3DX
+        >>> encoders = WheelEncoders(PIONEER3DX, np.random.default_rng(0), noise_free=True)
+        >>> encoders.reset([0.0, 0.0])
+        >>> increment, covariance = encoders.read([1.0, 1.0])
+        >>> increment.round(4), covariance.shape
+        (array([0.0975, 0.    , 0.    ]), (3, 3))
+        """
+        increment = self.odometry_increment(wheel_angles)
+        return increment, self._covariance(*self._last_deltas)
+
+    def _covariance(self, left_ticks: int, right_ticks: int) -> np.ndarray:
+        """Return :meth:`increment_covariance` for tick counts given as two numbers."""
         left = left_ticks * self._metres_per_tick
         right = right_ticks * self._metres_per_tick
         jacobian = arc_increment_jacobian(left, right, self.spec.wheel_separation)

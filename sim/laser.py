@@ -196,8 +196,13 @@ class RaycastLaser:
         """Cast every beam once and return the exact ``(ranges, body_ids)``.
 
         ``ranges`` is ``inf`` and ``body_ids`` is ``-1`` where a beam hits nothing within
-        ``range_max``. No noise; ``scan`` builds on this.
+        ``range_max``. No noise; ``scan`` builds on the same hits.
         """
+        body_ids, distances = self._hits(sensor_pose_xyz_yaw)
+        return np.where(body_ids >= 0, distances, np.inf), body_ids
+
+    def _hits(self, sensor_pose_xyz_yaw: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Return every beam's hit body id (-1: none) and ``hit fraction * range_max``."""
         x, y, z, yaw = np.asarray(sensor_pose_xyz_yaw, dtype=float).tolist()
         # math's cos and sin are numpy's to the last bit (both call the C library).
         cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
@@ -228,9 +233,9 @@ class RaycastLaser:
         count = len(results)
         # map(itemgetter) stays in C: no Python frame per beam, unlike a generator.
         body_ids = np.fromiter(map(_HIT_BODY, results), dtype=np.int64, count=count)
-        fractions = np.fromiter(map(_HIT_FRACTION, results), dtype=float, count=count)
-        ranges = np.where(body_ids >= 0, fractions * length, np.inf)
-        return ranges, body_ids
+        distances = np.fromiter(map(_HIT_FRACTION, results), dtype=float, count=count)
+        distances *= length
+        return body_ids, distances
 
     def scan(self, sensor_pose_xyz_yaw: ArrayLike, stamp: float = 0.0) -> Scan:
         """Take one scan from ``sensor_pose_xyz_yaw`` = (x, y, z, yaw) in the world.
@@ -245,12 +250,13 @@ class RaycastLaser:
                 f"RaycastLaser.scan: sensor pose must be 4 finite numbers (x, y, z, yaw), "
                 f"got {pose!r}"
             )
-        true_ranges, body_ids = self.cast(pose)
+        body_ids, distances = self._hits(pose)
         hit = body_ids >= 0
         remission = self.world.remission_of(body_ids)
         spec = self.spec
         if self.noise_free:
-            ranges, intensities = true_ranges, remission
+            ranges = np.where(hit, distances, np.inf)
+            intensities = remission
         else:
             # draw the same amount of noise every scan so the stream never depends on hits
             count = spec.num_beams
@@ -258,13 +264,16 @@ class RaycastLaser:
             intensity_noise = self.rng.normal(0.0, spec.intensity_sigma, count)
             dropped = self.rng.random(count) < spec.dropout_prob
             # numpy.clip, as maximum then minimum (clip's Python wrapper costs more than both).
-            measured = true_ranges + self.bias
+            # A missed beam's distance is range_max, not inf: where() below drops it anyway.
+            measured = distances
+            measured += self.bias
             measured += range_noise
             np.maximum(measured, 0.0, out=measured)
             np.minimum(measured, spec.range_max, out=measured)
             hit &= ~dropped
             ranges = np.where(hit, measured, np.inf)
-            intensities = remission + intensity_noise
+            intensities = remission
+            intensities += intensity_noise
             np.maximum(intensities, 0.0, out=intensities)
             intensities[~hit] = 0.0
         return Scan(
