@@ -202,7 +202,8 @@ class Testbench:
             self.fleet[0].log = self.log  # the run's log is the vehicle's
         else:
             self._attach_fleet_observers(spec)
-        self._people = People(self.world)
+        # A world without people costs no per-tick call (person_positions stays empty).
+        self._people = People(self.world) if self.world.people else None
         self._control = Schedule(rates.control_hz, rates.physics_hz)
         self._localization = Schedule(rates.localization_hz, rates.physics_hz)
         self._safety = Schedule(rates.safety_hz, rates.physics_hz)
@@ -282,6 +283,8 @@ class Testbench:
 
     # The tick in named pieces (physics stepping and per-tick glue stay easy to find).
     def _walk_people(self) -> None:
+        if self._people is None:
+            return
         lead = self.fleet[0]
         self.person_positions = self._people.update(self._sim.sim_time,
                                                     lap_start=lead.lap_log.start_time)
