@@ -49,7 +49,7 @@ pytestmark = pytest.mark.bench
 
 # Stages of one closed-loop tick: (owner, method, label).
 STAGES = (
-    (RaycastLaser, "cast", "ray cast (PyBullet rayTestBatch + hit lists)"),
+    (RaycastLaser, "hits", "ray cast (PyBullet rayTestBatch + hit lists)"),
     (RaycastLaser, "scan", "laser scan (cast + noise)"),
     (Vehicle, "landmarks", "landmark detection"),
     (Vehicle, "_predict", "odometry + EKF predict"),

@@ -198,11 +198,34 @@ class RaycastLaser:
         ``ranges`` is ``inf`` and ``body_ids`` is ``-1`` where a beam hits nothing within
         ``range_max``. No noise; ``scan`` builds on the same hits.
         """
-        body_ids, distances = self._hits(sensor_pose_xyz_yaw)
+        body_ids, distances = self.hits(sensor_pose_xyz_yaw)
         return np.where(body_ids >= 0, distances, np.inf), body_ids
 
-    def _hits(self, sensor_pose_xyz_yaw: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Return every beam's hit body id (-1: none) and ``hit fraction * range_max``."""
+    def hits(self, sensor_pose_xyz_yaw: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Cast every beam once; return its hit body id (-1: none) and ``fraction * range_max``.
+
+        The one ray cast behind :meth:`cast` and :meth:`scan`: a beam that hits nothing
+        reads ``range_max`` here (``cast`` turns it into ``inf``, ``scan`` drops it).
+
+        Examples
+        --------
+        >>> from robots.lasers import LMS100
+        >>> from sim.client import SimClient
+        >>> from sim.world_builder import SimWorld
+        >>> from worlds.spec import PathSpec, SegmentSpec, WallSpec, WorldSpec
+        >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+        >>> path = PathSpec([(0.0, 0.0), (1.0, 0.0)], [SegmentSpec("a", 0, 1, field, field)])
+        >>> spec = WorldSpec(name="wall", walls=(WallSpec((3.0, -5.0), (3.0, 5.0)),),
+        ...                  posts=(), boxes=(), people=(), path=path)
+        >>> with SimClient() as sim:
+        ...     world = SimWorld(sim, spec)
+        ...     laser = RaycastLaser(sim, LMS100, world, np.random.default_rng(0))
+        ...     body_ids, distances = laser.hits((0.0, 0.0, 0.3, 0.0))
+        >>> bool(body_ids[270] == world.body_id("wall_0")), round(float(distances[270]), 4)
+        (True, 2.95)
+        >>> int(body_ids[0]), float(distances[0]) == LMS100.range_max
+        (-1, True)
+        """
         x, y, z, yaw = np.asarray(sensor_pose_xyz_yaw, dtype=float).tolist()
         # math's cos and sin are numpy's to the last bit (both call the C library).
         cos_yaw, sin_yaw = math.cos(yaw), math.sin(yaw)
@@ -250,7 +273,7 @@ class RaycastLaser:
                 f"RaycastLaser.scan: sensor pose must be 4 finite numbers (x, y, z, yaw), "
                 f"got {pose!r}"
             )
-        body_ids, distances = self._hits(pose)
+        body_ids, distances = self.hits(pose)
         hit = body_ids >= 0
         remission = self.world.remission_of(body_ids)
         spec = self.spec
