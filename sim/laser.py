@@ -212,19 +212,15 @@ class RaycastLaser:
         >>> from robots.lasers import LMS100
         >>> from sim.client import SimClient
         >>> from sim.world_builder import SimWorld
-        >>> from worlds.spec import PathSpec, SegmentSpec, WallSpec, WorldSpec
-        >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
-        >>> path = PathSpec([(0.0, 0.0), (1.0, 0.0)], [SegmentSpec("a", 0, 1, field, field)])
-        >>> spec = WorldSpec(name="wall", walls=(WallSpec((3.0, -5.0), (3.0, 5.0)),),
-        ...                  posts=(), boxes=(), people=(), path=path)
-        >>> with SimClient() as sim:
-        ...     world = SimWorld(sim, spec)
+        >>> from worlds.load import load_world
+        >>> with SimClient() as sim:  # sim1's hall; beam 270 looks straight ahead
+        ...     world = SimWorld(sim, load_world("sim1"))
         ...     laser = RaycastLaser(sim, LMS100, world, np.random.default_rng(0))
-        ...     body_ids, distances = laser.hits((0.0, 0.0, 0.3, 0.0))
-        >>> bool(body_ids[270] == world.body_id("wall_0")), round(float(distances[270]), 4)
-        (True, 2.95)
-        >>> int(body_ids[0]), float(distances[0]) == LMS100.range_max
-        (-1, True)
+        ...     body_ids, distances = laser.hits((1.0, 0.0, 0.3, 0.0))
+        ...     ahead = world.name_of(int(body_ids[270])), round(float(distances[270]), 2)
+        ...     body_ids, distances = laser.hits((1.0, 0.0, 5.0, 0.0))  # above the walls
+        >>> ahead, int(body_ids.max()), float(distances.min())
+        (('post_10', 8.85), -1, 20.0)
         """
         x, y, z, yaw = np.asarray(sensor_pose_xyz_yaw, dtype=float).tolist()
         # math's cos and sin are numpy's to the last bit (both call the C library).
