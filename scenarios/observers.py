@@ -297,8 +297,10 @@ class Table1Reference:
             return
         reference = self.reference[record.segment]
         # Same segment frame, same scan: the polylines extracted for the local map serve.
+        # Table 1 reads the pairs only, not which reference polylines were missed.
         report = reference.associate(
-            record.scan, record.sensor_pose, scan_polylines=record.report.scan_polylines
+            record.scan, record.sensor_pose, scan_polylines=record.report.scan_polylines,
+            find_missed=False,
         )
         log = bench.log
         for pair in report.associated:

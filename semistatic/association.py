@@ -495,7 +495,8 @@ def associate_with_distances(
     if not scans or not maps:
         return []
     return associate_boxed(scans, _boxes(scans), maps, _boxes(maps), gate,
-                           viewpoint=viewpoint, mode=mode)
+                           viewpoint=None if viewpoint is None else _viewpoint_pose(viewpoint),
+                           mode=mode)
 
 
 def associate_boxed(
@@ -508,13 +509,16 @@ def associate_boxed(
     viewpoint: ArrayLike | None = None,
     mode: str = "vertex",
     map_vertices: tuple[np.ndarray, np.ndarray] | None = None,
+    scan_vertices: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[tuple[int, int, float]]:
     """Return :func:`associate_with_distances` of polylines whose boxes are known.
 
     For callers that keep their polylines' :func:`bounding_boxes` (``(n, 4)`` and
     ``(m, 4)``), e.g. a map between updates: the polylines must be :class:`Polyline`
-    objects and ``gate > 0`` (neither is checked here). ``map_vertices``, when given, is
-    :func:`semistatic.polyline.pack_vertices` of the map polylines (read, never written).
+    objects, ``gate > 0`` and ``viewpoint`` a finite ``(x, y, theta)`` (none is checked
+    here). ``map_vertices`` and ``scan_vertices``, when given, are
+    :func:`semistatic.polyline.pack_vertices` of the map and of the scan polylines
+    (C-contiguous writeable float64 vertices, read, never written).
 
     Examples
     --------
@@ -526,7 +530,7 @@ def associate_boxed(
     scans, maps = scan_polylines, map_polylines
     if not scans or not maps:
         return []
-    pose = None if viewpoint is None else _viewpoint_pose(viewpoint)
+    pose = None if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects.
     near, rows, columns = _broad_phase(scan_boxes, map_boxes, float(gate))
@@ -534,7 +538,10 @@ def associate_boxed(
         return []
     scans = [scans[k] for k in rows.tolist()]
     candidates = [maps[k] for k in columns.tolist()]
-    scan_points, scan_bounds = _concatenated(scans)
+    if scan_vertices is not None and len(scans) == len(scan_polylines):
+        scan_points, scan_bounds = scan_vertices  # every scan polyline is a candidate
+    else:
+        scan_points, scan_bounds = _concatenated(scans)
     if map_vertices is not None and len(candidates) == len(maps):
         map_points, map_bounds = map_vertices  # every map polyline is a candidate
     else:

@@ -213,14 +213,25 @@ def pairwise_restricted_hausdorff(
     """
     code = _mode_code(mode)
     return _pairwise_kernel(
-        np.array(points0, dtype=np.float64, order="C").reshape(-1, 2),
+        _writeable_points(points0),
         np.asarray(bounds0, dtype=np.int64),
-        np.array(points1, dtype=np.float64, order="C").reshape(-1, 2),
+        _writeable_points(points1),
         np.asarray(bounds1, dtype=np.int64),
         np.asarray(pairs, dtype=np.int64).reshape(-1, 2),
         code,
         float(limit),
     )
+
+
+def _writeable_points(points: ArrayLike) -> np.ndarray:
+    """Return ``(N, 2)`` vertices as the array type the kernels are compiled for.
+
+    (As :func:`_kernel_points`; arrays that already are one pass without a copy.)
+    """
+    array = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if array.flags.c_contiguous and array.flags.writeable:
+        return array
+    return np.array(array, order="C")
 
 
 def _mode_code(mode: str) -> int:

@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.association import box_gap
-from semistatic.hausdorff import restricted_hausdorff
+from semistatic.hausdorff import pairwise_restricted_hausdorff
 from semistatic.merge import distinct_vertices, merge, project_onto
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import Polyline, as_polyline, pack_vertices
 
 __all__ = ["MIN_OVERLAP", "join", "merge_group", "overlapping_groups", "overlaps"]
 
@@ -77,20 +77,35 @@ def overlaps(
     points1 = distinct_vertices(as_polyline(p1).points)
     if points0.shape[0] == 0 or points1.shape[0] == 0:
         return False
-    if points0.shape[0] == 1 and points1.shape[0] == 1:
-        extents = bool(np.hypot(*(points0[0] - points1[0])) <= gate)
-    elif points0.shape[0] == 1 or points1.shape[0] == 1:
-        point, line = (points0, points1) if points0.shape[0] == 1 else (points1, points0)
-        extents = _projection_span(point, line)[1]
-    else:
-        span01, _ = _projection_span(points1, points0)
-        span10, _ = _projection_span(points0, points1)
-        extents = max(span01, span10) > MIN_OVERLAP
-    if not extents:
+    if not _extents_overlap(points0, points1, gate):
         return False
-    line0 = Polyline._trusted(points0, np.arange(points0.shape[0], dtype=np.int64))
-    line1 = Polyline._trusted(points1, np.arange(points1.shape[0], dtype=np.int64))
-    return restricted_hausdorff(line0, line1, mode) <= gate
+    points, offsets = pack_vertices([points0, points1])
+    return _restricted_hausdorffs(points, offsets, np.array([[0, 1]]), gate, mode)[0] <= gate
+
+
+def _extents_overlap(points0: np.ndarray, points1: np.ndarray, gate: float) -> bool:
+    """Return the extent test of :func:`overlaps` on distinct, non-empty vertices."""
+    if points0.shape[0] == 1 and points1.shape[0] == 1:
+        return bool(np.hypot(*(points0[0] - points1[0])) <= gate)
+    if points0.shape[0] == 1 or points1.shape[0] == 1:
+        point, line = (points0, points1) if points0.shape[0] == 1 else (points1, points0)
+        return _projection_span(point, line)[1]
+    span01, _ = _projection_span(points1, points0)
+    span10, _ = _projection_span(points0, points1)
+    return max(span01, span10) > MIN_OVERLAP
+
+
+def _restricted_hausdorffs(
+    points: np.ndarray, offsets: np.ndarray, pairs: np.ndarray, gate: float, mode: str
+) -> list[float]:
+    """Return the restricted Hausdorff distance of packed polyline ``pairs``, in one call.
+
+    A distance above ``gate`` may be only a lower bound, but it fails the gate exactly
+    when the full distance does (:func:`semistatic.hausdorff.pairwise_restricted_hausdorff`).
+    """
+    return pairwise_restricted_hausdorff(
+        points, offsets, points, offsets, pairs, mode, limit=gate
+    ).tolist()
 
 
 def join(
@@ -198,6 +213,23 @@ def overlapping_groups(
     )
     if not first.size:
         return []
+    # Distinct vertices of every polyline in a near pair, packed: the restricted Hausdorff
+    # test of all near pairs in one compiled call, the extents only where it passes.
+    members = sorted({*first.tolist(), *second.tolist()})
+    distinct = {k: distinct_vertices(as_polyline(polylines[k]).points) for k in members}
+    position = {k: n for n, k in enumerate(members)}
+    points, offsets = pack_vertices([distinct[k] for k in members])
+    pairs = [
+        (a, b) for a, b in zip(first.tolist(), second.tolist(), strict=True)
+        if distinct[a].shape[0] and distinct[b].shape[0]  # an empty polyline overlaps nothing
+    ]
+    if not pairs:
+        return []
+    distances = _restricted_hausdorffs(
+        points, offsets,
+        np.array([(position[a], position[b]) for a, b in pairs], dtype=np.int64),
+        gate, mode,
+    )
     parent = list(range(len(polylines)))
 
     def root(k: int) -> int:
@@ -207,11 +239,15 @@ def overlapping_groups(
         return k
 
     # The components do not depend on the order in which the pairs are linked.
-    for a, b in zip(first.tolist(), second.tolist(), strict=True):
-        if root(a) != root(b) and overlaps(polylines[a], polylines[b], gate, mode):
+    for (a, b), distance in zip(pairs, distances, strict=True):
+        if (
+            distance <= gate
+            and root(a) != root(b)
+            and _extents_overlap(distinct[a], distinct[b], gate)
+        ):
             parent[root(b)] = root(a)
     groups: dict[int, list[int]] = {}
-    for k in sorted({*first.tolist(), *second.tolist()}):
+    for k in members:
         groups.setdefault(root(k), []).append(k)
     return sorted(members for members in groups.values() if len(members) > 1)
 

@@ -250,13 +250,15 @@ class LocalMap:
         return self._map.update(scan, self.to_local(pose), timings=timings)
 
     def associate(
-        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None
+        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None,
+        find_missed: bool = True,
     ) -> UpdateReport:
         """Associate one scan taken from sensor ``pose`` (world frame) without changing the map.
 
         See :meth:`semistatic.mapper.PolylineMap.associate`. ``scan_polylines``, when
         given, are this scan's polylines in the segment frame (e.g. the update report of
-        another map of the same segment for the same scan), so extraction is skipped.
+        another map of the same segment for the same scan), so extraction is skipped;
+        without ``find_missed`` the report's ``missed_ids`` is left empty.
 
         Examples
         --------
@@ -268,7 +270,8 @@ class LocalMap:
         >>> len(segment)
         1
         """
-        return self._map.associate(scan, self.to_local(pose), scan_polylines=scan_polylines)
+        return self._map.associate(scan, self.to_local(pose), scan_polylines=scan_polylines,
+                                   find_missed=find_missed)
 
     def to_geojson(self) -> dict[str, Any]:
         """Return the map as a GeoJSON FeatureCollection in world coordinates.

@@ -46,7 +46,7 @@ Examples
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import NamedTuple
@@ -60,7 +60,7 @@ from semistatic.extraction import extract_polylines
 from semistatic.join import merge_group, overlapping_groups
 from semistatic.merge import END_TOLERANCE_FACTOR, merge_observations
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
-from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_boxes
+from semistatic.polyline import PackedPolylines, Polyline, as_polyline, pack_vertices, run_boxes
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
@@ -366,9 +366,12 @@ class PolylineMap:
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        indices = [*paired_scans, *self._maybe_kept(scan_lines, unassociated)]
+        indices = sorted([*paired_scans, *self._maybe_kept(scan_lines, unassociated)])
+        every = len(indices) == len(scan_lines)  # then the scan's packed vertices serve
         observed = dict(zip(indices, extend_all_ends(
-            [scan_lines[index] for index in indices], scan.angle_increment, viewpoint=pose
+            scan_lines if every else [scan_lines[index] for index in indices],
+            scan.angle_increment, viewpoint=pose,
+            packed=(scan_lines.points, scan_lines.offsets) if every else None,
         ), strict=True))
         changed = self._merge_associated(observed, associated, stamp)
         cut_away = []
@@ -437,7 +440,7 @@ class PolylineMap:
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
-            scan_lines,
+            tuple(scan_lines),
             associated,
             unassociated,
             new_ids=tuple(new_ids),
@@ -447,7 +450,8 @@ class PolylineMap:
         )
 
     def associate(
-        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None
+        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None,
+        find_missed: bool = True,
     ) -> UpdateReport:
         """Associate one scan with the map without changing the map (paper Sec. 6, Table 1).
 
@@ -465,6 +469,9 @@ class PolylineMap:
             The polylines of this very scan from this pose in this map's frame, when
             another map in the same frame has extracted them already (its update report's
             ``scan_polylines``); extracted from ``scan`` when omitted.
+        find_missed
+            Whether to look for the missed map polylines (a pass over the beams); without,
+            the report's ``missed_ids`` is empty (e.g. Table 1 reads only the pairs).
 
         Examples
         --------
@@ -479,29 +486,39 @@ class PolylineMap:
         if scan_polylines is None:
             scan_lines = _map_frame_polylines(scan, self.params, pose)
         else:
-            scan_lines = tuple(scan_polylines)
+            scan_lines = scan_polylines
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
+        if not find_missed:
+            unpaired_ids = []
         checked = missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
         missed = tuple(
             map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
         )
-        return UpdateReport(scan.stamp, scan_lines, associated, unassociated, missed_ids=missed)
+        return UpdateReport(
+            scan.stamp, tuple(scan_lines), associated, unassociated, missed_ids=missed
+        )
 
     def _associated(
-        self, scan_lines: tuple[Polyline, ...], pose: np.ndarray
+        self, scan_lines: Sequence[Polyline], pose: np.ndarray
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
-        """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
+        """Return the validated pairs, the unpaired scan indices and the unpaired map ids.
+
+        ``scan_lines`` as extracted (:class:`PackedPolylines`) bring their packed vertices
+        and boxes; any other sequence is packed here.
+        """
         geometry = self._geometry()
         ids = geometry.ids
+        packed = isinstance(scan_lines, PackedPolylines)
         triples = associate_boxed(
             scan_lines,
-            bounding_boxes(scan_lines),
+            scan_lines.boxes if packed else bounding_boxes(scan_lines),
             geometry.lines,
             geometry.boxes,
             self.params.gate,
             viewpoint=pose,
             mode=self.params.hausdorff_restriction,
             map_vertices=(geometry.points, geometry.offsets),
+            scan_vertices=(scan_lines.points, scan_lines.offsets) if packed else None,
         )
         associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
         paired_scans = {pair.scan_index for pair in associated}
@@ -526,7 +543,7 @@ class PolylineMap:
         self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
         return self._geometry_cache
 
-    def _maybe_kept(self, scan_lines: tuple[Polyline, ...], indices: tuple[int, ...]) -> list[int]:
+    def _maybe_kept(self, scan_lines: Sequence[Polyline], indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
         if self._keep_box is None:
             return list(indices)
@@ -691,11 +708,9 @@ def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
     return pose
 
 
-def _map_frame_polylines(
-    scan: Scan, params: MapperParams, pose: np.ndarray
-) -> tuple[Polyline, ...]:
+def _map_frame_polylines(scan: Scan, params: MapperParams, pose: np.ndarray) -> PackedPolylines:
     """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame."""
-    return tuple(extract_polylines(scan, params, pose=pose))
+    return extract_polylines(scan, params, pose=pose)
 
 
 class _StageClock:

@@ -36,6 +36,7 @@ array([[0.   , 0.005],
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -193,12 +194,13 @@ def distinct_vertices(points: ArrayLike) -> np.ndarray:
 _VERTEX_ORDER: dict[int, np.ndarray] = {}
 
 
-def _polyline(points: np.ndarray) -> Polyline:
-    """Wrap fresh finite vertices computed here as a polyline (scan indices: vertex order)."""
-    indices = _VERTEX_ORDER.get(points.shape[0])
-    if indices is None:  # frozen by _trusted, so shared by every polyline of that size
-        indices = _VERTEX_ORDER[points.shape[0]] = np.arange(points.shape[0], dtype=np.int64)
-    return Polyline._trusted(points, indices)
+def _vertex_order(count: int) -> np.ndarray:
+    """Return the read-only scan indices ``0..count-1``, shared by every polyline of that size."""
+    indices = _VERTEX_ORDER.get(count)
+    if indices is None:
+        indices = _VERTEX_ORDER[count] = np.arange(count, dtype=np.int64)
+        indices.flags.writeable = False
+    return indices
 
 
 @numba.njit(cache=True)
@@ -362,8 +364,7 @@ def _merged_parts(
             f"{caller}: need one observation and one weight per map polyline, got "
             f"{len(lines)} polylines, {len(observations)} observations, {weights.size} weights"
         )
-    with np.errstate(divide="ignore"):
-        alphas = np.where(np.isfinite(weights), 1.0 / (1.0 + weights), 0.0)
+    alphas = 1.0 / (1.0 + weights)  # weights >= 0: no division by zero; inf gives 0
     parts = [[as_polyline(part).points for part in parts] for parts in observations]
     points, offsets = pack_vertices([line.points for line in lines])
     part_points, part_offsets = pack_vertices([part for line_parts in parts for part in line_parts])
@@ -373,9 +374,13 @@ def _merged_parts(
         points, offsets, part_points, part_offsets, first_parts, alphas, tolerance, epsilon
     )
     bounds = merged_offsets.tolist()
+    # Views of the one fresh array, frozen once (scan indices: vertex order).
+    views = Polyline._views(merged, bounds, [
+        _vertex_order(stop - start) for start, stop in itertools.pairwise(bounds)
+    ])
     return [
-        _polyline(merged[bounds[k] : bounds[k + 1]]) if is_changed else line
-        for k, (line, is_changed) in enumerate(zip(lines, changed.tolist(), strict=True))
+        view if is_changed else line
+        for line, view, is_changed in zip(lines, views, changed.tolist(), strict=True)
     ]
 
 

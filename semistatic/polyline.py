@@ -28,7 +28,15 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["EMPTY_BOX", "Polyline", "as_polyline", "pack_vertices", "run_boxes", "run_offsets"]
+__all__ = [
+    "EMPTY_BOX",
+    "PackedPolylines",
+    "Polyline",
+    "as_polyline",
+    "pack_vertices",
+    "run_boxes",
+    "run_offsets",
+]
 
 EMPTY_BOX = (np.inf, np.inf, -np.inf, -np.inf)
 """The bounding box of no points: farther than anything from everything."""
@@ -117,25 +125,28 @@ class Polyline:
     @classmethod
     def _split(
         cls, points: np.ndarray, scan_indices: np.ndarray, bounds: list[int]
-    ) -> list[Polyline]:
+    ) -> PackedPolylines:
         """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid arrays.
 
         The arrays are frozen once and each polyline holds views of them (hot paths only,
         as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
-        all non-empty runs are found in one pass and cached as their :attr:`box`.
+        all non-empty runs are found in one pass and cached as their :attr:`box`; the
+        result keeps the packed vertices and the boxes for the kernels
+        (:class:`PackedPolylines`).
         """
-        # (The boxes first: the kernel is compiled for writeable arrays.)
-        boxes = map(tuple, run_boxes(points, bounds).tolist())
+        offsets = np.asarray(bounds, dtype=np.int64)
+        # (The boxes and the kernels' copy first: kernels are compiled for writeable arrays.)
+        boxes = run_boxes(points, offsets)
+        packed = PackedPolylines(points.copy(), offsets, boxes)
         points.flags.writeable = False
         scan_indices.flags.writeable = False
-        lines = []
-        for start, stop, box in zip(bounds, bounds[1:], boxes, strict=False):
+        for start, stop, box in zip(bounds, bounds[1:], map(tuple, boxes.tolist()), strict=False):
             line = object.__new__(cls)
             line.__dict__.update(
                 points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
             )
-            lines.append(line)
-        return lines
+            packed.append(line)
+        return packed
 
     @classmethod
     def _views(
@@ -233,6 +244,44 @@ def as_polyline(obj: Polyline | ArrayLike) -> Polyline:
     if isinstance(obj, Polyline):
         return obj
     return Polyline(obj)
+
+
+class PackedPolylines(list):
+    """A list of polylines that are the consecutive runs of one vertex array.
+
+    What :func:`semistatic.extraction.extract_polylines` returns: a plain list of
+    :class:`Polyline` that also keeps, for compiled kernels, all vertices packed
+    (:func:`pack_vertices`) and the bounding boxes (:func:`run_boxes`), so that nothing
+    downstream packs the same scan again.
+
+    Parameters
+    ----------
+    points
+        ``(N, 2)`` vertices of all polylines one after the other: a writeable copy the
+        polylines do not share (a kernel may take it, none may write to it).
+    offsets
+        ``(K + 1,)`` int64: polyline ``k`` is ``points[offsets[k]:offsets[k + 1]]``.
+    boxes
+        ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)``.
+    lines
+        The polylines themselves (appended by the producer when not given).
+
+    Examples
+    --------
+    >>> points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0]])
+    >>> lines = Polyline._split(points.copy(), np.arange(4), [0, 2, 4])
+    >>> isinstance(lines, list), len(lines), lines.offsets, lines.boxes[1]
+    (True, 2, array([0, 2, 4]), array([2., 2., 3., 2.]))
+    """
+
+    def __init__(
+        self, points: np.ndarray, offsets: np.ndarray, boxes: np.ndarray,
+        lines: Iterable[Polyline] = (),
+    ) -> None:
+        super().__init__(lines)
+        self.points = points
+        self.offsets = offsets
+        self.boxes = boxes
 
 
 def run_offsets(sizes: Iterable[int], count: int) -> np.ndarray:

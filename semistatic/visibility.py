@@ -213,10 +213,13 @@ def extend_all_ends(
     *,
     viewpoint: ArrayLike = (0.0, 0.0),
     limit: float = MAX_END_EXTENSION,
+    packed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[Polyline]:
     """Return :func:`extend_ends` of many scan polylines of one scan, in one compiled call.
 
-    A polyline whose ends do not move is returned as itself.
+    A polyline whose ends do not move is returned as itself. ``packed``, when given, is
+    :func:`semistatic.polyline.pack_vertices` of ``polylines`` (e.g. a
+    :class:`~semistatic.polyline.PackedPolylines`'), read, never written.
 
     Examples
     --------
@@ -227,7 +230,10 @@ def extend_all_ends(
     if not polylines:
         return []
     origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    points, offsets = pack_vertices([line.points for line in polylines])
+    if packed is None:
+        points, offsets = pack_vertices([line.points for line in polylines])
+    else:
+        points, offsets = packed[0].copy(), packed[1]  # the ends move in place
     moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
     # Finite vertices moved by a finite shift: nothing to check.
     views = Polyline._views(points, offsets.tolist(), [line.scan_indices for line in polylines])
