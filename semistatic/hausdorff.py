@@ -305,18 +305,16 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
         nearest1, argmin1 = _row_minima(to0, first0, stop0)
         best = -math.inf
         for v in range(low0, high0 + 1):
-            if nearest0[v] > best:
-                best = nearest0[v]
+            best = max(best, nearest0[v])
         for v in range(low1, high1 + 1):
-            if nearest1[v] > best:
-                best = nearest1[v]
+            best = max(best, nearest1[v])
         if best <= limit:
             # A piece of an edge: its ends, the middle_rows there to the target segments, their
             # minima, and which polyline it belongs to. An edge whose ends have the same nearest
             # segment is settled from the start (its bound is the larger end value, already in
             # ``best``), so it is not even a piece.
             width0, width1 = stop1 - first1, stop0 - first0
-            width = width1 if width1 > width0 else width0
+            width = max(width0, width1)
             count = 0
             for v in range(low0, high0):
                 count += argmin0[v] != argmin0[v + 1]
@@ -371,17 +369,12 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
                     end_i, start_j = highs[e, i], lows[e, j]
                     lead = start_j - fa
                     crossing = lead / ((end_i - fb) + lead + _TINY)  # in [0, 1]; 0 when i == j
-                    bound = fa + crossing * (end_i - fa)
-                    if fb > bound:
-                        bound = fb
+                    bound = max(fa + crossing * (end_i - fa), fb)
                     if bound <= best + HAUSDORFF_TOLERANCE:
                         continue
                     found = True
                     split = crossing if rounds < _CHORD_SPLITS else 0.5
-                    if _MIN_SPLIT > split:
-                        split = _MIN_SPLIT
-                    if 1.0 - _MIN_SPLIT < split:
-                        split = 1.0 - _MIN_SPLIT
+                    split = min(max(split, _MIN_SPLIT), 1.0 - _MIN_SPLIT)
                     mx = ends[e, 0] + split * (ends[e, 2] - ends[e, 0])
                     my = ends[e, 1] + split * (ends[e, 3] - ends[e, 1])
                     middles[e, 0], middles[e, 1] = mx, my
@@ -391,11 +384,9 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
                         middle_rows[e, k], _ = _to_segment(mx, my, table, first + k)
                     minimum = middle_rows[e, 0]
                     for k in range(1, size):
-                        if middle_rows[e, k] < minimum:
-                            minimum = middle_rows[e, k]
+                        minimum = min(minimum, middle_rows[e, k])
                     minima[e] = minimum
-                    if minima[e] > round_best:
-                        round_best = minima[e]
+                    round_best = max(round_best, minima[e])
                     # A piece whose new point comes within the tolerance of its bound is settled:
                     # with linear middle_rows (segment interiors) the chord crossing is the maximum.
                     if minima[e] < bound - HAUSDORFF_TOLERANCE:
@@ -444,10 +435,10 @@ def _segment_table(points):  # pragma: no cover - compiled
     A single vertex is one null segment (``1 / length^2`` is 0 for null segments, so the
     projection parameter is 0 and the distance the one to the start point).
     """
-    count = points.shape[0] - 1 if points.shape[0] > 2 else 1
+    count = max(points.shape[0] - 1, 1)
     table = np.empty((count, 7))
     for k in range(count):
-        end = k + 1 if k + 1 < points.shape[0] else points.shape[0] - 1
+        end = min(k + 1, points.shape[0] - 1)
         ax, ay = points[k, 0], points[k, 1]
         bx, by = points[end, 0], points[end, 1]
         dx, dy = bx - ax, by - ay
@@ -517,10 +508,8 @@ def _span_of_rows(rows):  # pragma: no cover - compiled
         for k in range(1, rows.shape[1]):
             if rows[v, k] < rows[v, nearest]:
                 nearest = k
-        if nearest < low:
-            low = nearest
-        if nearest > high:
-            high = nearest
+        low = min(low, nearest)
+        high = max(high, nearest)
     return low, high + 1
 
 
