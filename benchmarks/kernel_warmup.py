@@ -22,6 +22,8 @@ from robots.path import SplinePath
 from semistatic.association import associate, sort_ccw
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
 from semistatic.mapper import PolylineMap
+from semistatic.merge import project_onto
+from semistatic.polyline import Polyline
 from semistatic.similarity import similarity
 from semistatic.types import Scan
 from tests.semistatic.synthetic import cast_scan
@@ -42,6 +44,7 @@ def warm_up() -> float:
     restrict(wall, part, mode="projection")
     restricted_hausdorff(wall, part, mode="projection")
     similarity(wall, part)
+    project_onto(part, Polyline(wall))  # as join does it: a polyline's read-only vertices
     sort_ccw([wall, part], (0.0, 0.0, 0.0))
     associate([part], [wall], 0.12, viewpoint=(0.0, 0.0, 0.0))
     angles = np.radians(np.arange(-10.0, 10.5, 0.5))

@@ -800,7 +800,10 @@ def _stacked_pairs(
     count, columns = observations.size, jacobians.shape[2]
     measured, expected = np.empty((2 * count, 1)), np.empty((2 * count, 1))
     jacobian = np.empty((2 * count, columns))
-    noise = np.zeros((2 * count, 2 * count))
+    noise = np.empty((2 * count, 2 * count))  # (np.zeros in 2-d compiles code of its own)
+    for row in range(2 * count):
+        for column in range(2 * count):
+            noise[row, column] = 0.0
     for i in range(count):
         k, m = observations[i], landmarks[i]
         for row in range(2):

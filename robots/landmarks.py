@@ -656,8 +656,11 @@ def range_bearing_rows(
     dsy_dtheta = c * mount_x - s * mount_y
     count = landmark_x.size
     predicted = np.empty((count, 2))
-    jacobians = np.zeros((count, 2, columns))
+    jacobians = np.empty((count, 2, columns))  # (np.zeros in 3-d compiles code of its own)
     for m in range(count):
+        for row in range(2):
+            for column in range(3, columns):
+                jacobians[m, row, column] = 0.0
         dx = landmark_x[m] - sensor_x
         dy = landmark_y[m] - sensor_y
         range_sq = dx * dx + dy * dy
@@ -724,7 +727,7 @@ def mahalanobis_rows(measured, noise, predicted, jacobians, robot_cov):  # pragm
     distances = np.empty((count, landmarks))
     for m in range(landmarks):
         # H P Hᵀ of this landmark.
-        projected = np.zeros((2, 2))
+        projected = np.empty((2, 2))  # every entry is written below
         for i in range(2):
             for j in range(2):
                 total = 0.0

@@ -226,19 +226,19 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
     for k in range(1, count):
         item = order[k]
         j = k - 1
-        while j >= 0 and _key_less(keys, item, order[j]):
+        while j >= 0:
+            # Whether the key of item sorts before the key of order[j].
+            less = False
+            for column in range(3):
+                if keys[item, column] != keys[order[j], column]:
+                    less = keys[item, column] < keys[order[j], column]
+                    break
+            if not less:
+                break
             order[j + 1] = order[j]
             j -= 1
         order[j + 1] = item
     return order, clockwise
-
-
-@numba.njit(cache=True)
-def _key_less(keys, a, b):  # pragma: no cover - compiled
-    for column in range(3):
-        if keys[a, column] != keys[b, column]:
-            return keys[a, column] < keys[b, column]
-    return False
 
 
 def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) -> np.ndarray:
@@ -362,27 +362,6 @@ def _dtw_kernel(cost):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _is_unique(path, totals):  # pragma: no cover - compiled
-    """Return whether no other path reaches the end of ``path`` with the same total.
-
-    Another optimal path would leave this one, walking back from the end, at a cell where
-    two predecessors tie for the best total.
-    """
-    for k in range(1, path.shape[0]):
-        i, j = path[k, 0], path[k, 1]
-        best, ties = math.inf, 0
-        for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)):
-            if a >= 0 and b >= 0:
-                if totals[a, b] < best:
-                    best, ties = totals[a, b], 1
-                elif totals[a, b] == best:
-                    ties += 1
-        if ties > 1:
-            return False
-    return True
-
-
-@numba.njit(cache=True)
 def _lengths(points, bounds):  # pragma: no cover - compiled
     """Return the arc length (m) of each polyline of concatenated ``points``."""
     lengths = np.zeros(bounds.size - 1)
@@ -422,8 +401,19 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
                 shaped_pair = scan_lengths[a] > 0.0 and map_lengths[b] > 0.0
                 hard[a, b] = 0.0 if feasible[a, b] and shaped_pair else 1.0
         path, totals = _dtw_kernel(hard)
-        if not _is_unique(path, totals):
-            return path, False
+        # Only a unique path is fixed: another optimal path would leave this one, walking
+        # back from the end, at a cell where two predecessors tie for the best total.
+        for k in range(1, path.shape[0]):
+            i, j = path[k, 0], path[k, 1]
+            best, ties = math.inf, 0
+            for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)):
+                if a >= 0 and b >= 0:
+                    if totals[a, b] < best:
+                        best, ties = totals[a, b], 1
+                    elif totals[a, b] == best:
+                        ties += 1
+            if ties > 1:
+                return path, False
     bound = 0.0
     for k in range(path.shape[0]):
         a, b = path[k, 0], path[k, 1]

@@ -257,11 +257,13 @@ def _joined_beams(
     denominators: np.ndarray, sigma_r: float,
 ) -> np.ndarray:  # pragma: no cover - compiled
     """Return :func:`_joined` with the breakpoint table of :func:`_breakpoint_sines`."""
-    joined = np.empty(max(index.size - 1, 0), np.bool_)
+    joined = np.empty(index.size - 1 if index.size > 1 else 0, np.bool_)
     for k in range(joined.size):
         # Only steps of 1 .. MAX_BRIDGED_GAP + 1 beams can join: their sines come from a
         # table, and any longer step reads the table's last row, which joins nothing.
-        step = min(index[k + 1] - index[k], MAX_BRIDGED_GAP + 2)
+        step = index[k + 1] - index[k]
+        if step > MAX_BRIDGED_GAP + 2:
+            step = MAX_BRIDGED_GAP + 2
         threshold = ranges[index[k]] * sines[step] / denominators[step] + 3.0 * sigma_r
         joined[k] = math.hypot(x[k + 1] - x[k], y[k + 1] - y[k]) <= threshold
     return joined
@@ -280,7 +282,12 @@ def _simplified_intervals(
     the other, their beams, their interval numbers (``0, 1, ...``) and the positions of
     the vertices Douglas-Peucker keeps.
     """
-    x, y = ranges[index] * cos[index], ranges[index] * sin[index]
+    # Scalar loops, not array expressions: each numpy expression in a kernel compiles a
+    # broadcasting loop of its own at first use.
+    x, y = np.empty(index.size), np.empty(index.size)
+    for k in range(index.size):
+        x[k] = ranges[index[k]] * cos[index[k]]
+        y[k] = ranges[index[k]] * sin[index[k]]
     joined = _joined_beams(ranges, index, x, y, sines, denominators, sigma_r)
     points = np.empty((index.size, 2))
     beams = np.empty(index.size, np.int64)
@@ -300,7 +307,7 @@ def _simplified_intervals(
         start = stop
     points = points[:size]
     # Every interval but the last ends where the next begins.
-    kept = douglas_peucker_compiled(points, ends[: max(lines - 1, 0)], epsilon)
+    kept = douglas_peucker_compiled(points, ends[: lines - 1 if lines > 1 else 0], epsilon)
     return points, beams[:size], line_ids[:size], kept
 
 
@@ -338,7 +345,7 @@ def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: floa
     array([0, 2, 3, 4])
     """
     keep = np.zeros(points.shape[0], dtype=np.bool_)
-    sections = np.empty((max(points.shape[0], 1), 2), np.int64)
+    sections = np.empty((points.shape[0] if points.shape[0] > 1 else 1, 2), np.int64)
     first = np.int64(0)  # not a constant: a literal 0 would compile a kernel of its own
     for line in range(ends.size + 1 if points.shape[0] else 0):
         last = ends[line] if line < ends.size else np.int64(points.shape[0] - 1)
@@ -377,7 +384,16 @@ def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: floa
                 sections[pending + 1, 0], sections[pending + 1, 1] = start, index
                 pending += 2
         first = last + 1
-    return np.flatnonzero(keep)
+    count = 0
+    for k in range(keep.size):
+        count += keep[k]
+    kept = np.empty(count, np.int64)
+    count = 0
+    for k in range(keep.size):
+        if keep[k]:
+            kept[count] = k
+            count += 1
+    return kept
 
 
 # One line: douglas_peucker_compiled without inner line ends.

@@ -292,16 +292,6 @@ def _fit_rays(x, y, norms, first, last):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _max_distance(x, y, first, last, mx, my, dx, dy):  # pragma: no cover - compiled
-    """Return the largest perpendicular distance of readings first..last to a line."""
-    worst = 0.0
-    for k in range(first, last + 1):
-        distance = abs((x[k] - mx) * dy - (y[k] - my) * dx)
-        worst = max(worst, distance)
-    return worst
-
-
-@numba.njit(cache=True)
 def _project(px, py, mx, my, dx, dy):  # pragma: no cover - compiled
     """Return the projection of ``(px, py)`` onto a line."""
     along = (px - mx) * dx + (py - my) * dy
@@ -351,7 +341,12 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
         merged[0] = corners[start]
         for j in range(start + 1, stop):
             mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1])
-            if _max_distance(x, y, merged[size - 1], corners[j + 1], mx, my, dx, dy) > epsilon:
+            # The largest perpendicular distance of the readings to that line (inline: a
+            # kernel of its own costs a compilation at first use).
+            worst = 0.0
+            for k in range(merged[size - 1], corners[j + 1] + 1):
+                worst = max(worst, abs((x[k] - mx) * dy - (y[k] - my) * dx))
+            if worst > epsilon:
                 merged[size] = corners[j]
                 size += 1
         merged[size] = corners[stop]

@@ -267,8 +267,23 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
 
     ``mode`` 0: no restriction; 1: ``"vertex"``; 2: ``"projection"``. A pair's search
     stops as soon as its best distance exceeds ``limit`` (a lower bound above ``limit``).
-    The one entry point of the module's distances: each extra compiled layer costs its
-    own optimisation and cache pass at first use.
+    The one entry point of the module's distances, and the search is written inline: a
+    compiled caller re-optimises and re-emits the machine code of every kernel it calls,
+    so each extra layer over the search costs about as much as compiling it again.
+
+    In ``"vertex"`` mode both polylines are first restricted to each other (eq. 3); the
+    vertex-to-segment distances that choose the restriction are the same that start the
+    distance computation.
+
+    Both directed distances are found together by branch and bound along the edges of
+    the source curve, in rounds. On a piece ``[a, b]`` of an edge the distance ``d_j`` to
+    each target segment is convex, hence below its chord; for the segments ``i`` and ``j``
+    nearest to ``a`` and ``b``, the maximum of ``f = min_j d_j`` on the piece is at most
+    the crossing value of their chords (``max(f(a), f(b))`` when ``i`` serves both ends).
+    Pieces whose bound beats the best value found by more than ``HAUSDORFF_TOLERANCE``
+    are split at the chord crossing, which is exact when both distances are linear (to
+    segment interiors). Every ``d_j`` is 1-Lipschitz, so the bound exceeds ``f(a)`` by at
+    most the piece length: halving after ``_CHORD_SPLITS`` rounds ends the search.
     """
     distances = np.empty(pairs.shape[0])
     for p in range(pairs.shape[0]):
@@ -285,7 +300,142 @@ def _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, mode, limit):  #
                 cut0, _ = _projection_cut(cut0, cut1)
             if cut1.shape[0] >= 2:
                 cut1, _ = _projection_cut(cut1, whole0)
-        distances[p] = _branch_and_bound(cut0, cut1, mode == 1, limit)
+        count0, count1 = cut0.shape[0], cut1.shape[0]
+        table0, table1 = _segment_table(cut0), _segment_table(cut1)
+        to1 = _distance_rows(cut0, table1)
+        to0 = _distance_rows(cut1, table0)
+        # Vertex range [low, high] of each polyline taking part; the vertices of each measure
+        # against the other polyline's segments [first, stop).
+        low0, high0, low1, high1 = 0, count0 - 1, 0, count1 - 1
+        first1, stop1, first0, stop0 = 0, table1.shape[0], 0, table0.shape[0]
+        if mode == 1 and count0 >= 2 and count1 >= 2:
+            low0, high0 = _span_of_rows(to0)
+            low1, high1 = _span_of_rows(to1)
+            first1, stop1, first0, stop0 = low1, high1, low0, high0
+        nearest0, argmin0 = _row_minima(to1, first1, stop1)
+        nearest1, argmin1 = _row_minima(to0, first0, stop0)
+        best = -math.inf
+        for v in range(low0, high0 + 1):
+            best = max(best, nearest0[v])
+        for v in range(low1, high1 + 1):
+            best = max(best, nearest1[v])
+        if best <= limit:
+            # A piece of an edge: its ends, the middle_rows there to the target segments, their
+            # minima, and which polyline it belongs to. An edge whose ends have the same nearest
+            # segment is settled from the start (its bound is the larger end value, already in
+            # ``best``), so it is not even a piece.
+            width0, width1 = stop1 - first1, stop0 - first0
+            width = max(width0, width1)
+            count = 0
+            for v in range(low0, high0):
+                count += argmin0[v] != argmin0[v + 1]
+            for v in range(low1, high1):
+                count += argmin1[v] != argmin1[v + 1]
+            ends = np.empty((count, 4))
+            lows = np.empty((count, width))
+            highs = np.empty((count, width))
+            values = np.empty((count, 2))
+            sides = np.empty(count, np.int64)
+            piece = 0
+            for side in range(2):
+                points = cut0 if side == 0 else cut1
+                rows = to1 if side == 0 else to0
+                argmins = argmin0 if side == 0 else argmin1
+                nearest = nearest0 if side == 0 else nearest1
+                first = first1 if side == 0 else first0
+                size = width0 if side == 0 else width1
+                low = low0 if side == 0 else low1
+                high = high0 if side == 0 else high1
+                for v in range(low, high):
+                    if argmins[v] != argmins[v + 1]:
+                        ends[piece, 0], ends[piece, 1] = points[v, 0], points[v, 1]
+                        ends[piece, 2], ends[piece, 3] = points[v + 1, 0], points[v + 1, 1]
+                        for k in range(size):
+                            lows[piece, k] = rows[v, first + k]
+                            highs[piece, k] = rows[v + 1, first + k]
+                        values[piece, 0], values[piece, 1] = nearest[v], nearest[v + 1]
+                        sides[piece] = side
+                        piece += 1
+            rounds = 0
+            while count > 0:
+                middles = np.empty((count, 2))
+                middle_rows = np.empty((count, width))
+                minima = np.empty(count)
+                open_ = np.empty(count, np.bool_)
+                found = False
+                round_best = best
+                kept = 0
+                for e in range(count):
+                    open_[e] = False
+                    side = sides[e]
+                    size = width0 if side == 0 else width1
+                    fa, fb = values[e, 0], values[e, 1]
+                    i, j = 0, 0  # the segments nearest to the ends (the lowest on ties)
+                    for k in range(1, size):
+                        if lows[e, k] < lows[e, i]:
+                            i = k
+                        if highs[e, k] < highs[e, j]:
+                            j = k
+                    # Chord of d_i runs from fa to end_i; chord of d_j from start_j to fb.
+                    end_i, start_j = highs[e, i], lows[e, j]
+                    lead = start_j - fa
+                    crossing = lead / ((end_i - fb) + lead + _TINY)  # in [0, 1]; 0 when i == j
+                    bound = max(fa + crossing * (end_i - fa), fb)
+                    if bound <= best + HAUSDORFF_TOLERANCE:
+                        continue
+                    found = True
+                    split = crossing if rounds < _CHORD_SPLITS else 0.5
+                    split = min(max(split, _MIN_SPLIT), 1.0 - _MIN_SPLIT)
+                    mx = ends[e, 0] + split * (ends[e, 2] - ends[e, 0])
+                    my = ends[e, 1] + split * (ends[e, 3] - ends[e, 1])
+                    middles[e, 0], middles[e, 1] = mx, my
+                    table = table1 if side == 0 else table0
+                    first = first1 if side == 0 else first0
+                    for k in range(size):
+                        middle_rows[e, k], _ = _to_segment(mx, my, table, first + k)
+                    minimum = middle_rows[e, 0]
+                    for k in range(1, size):
+                        minimum = min(minimum, middle_rows[e, k])
+                    minima[e] = minimum
+                    round_best = max(round_best, minima[e])
+                    # A piece whose new point comes within the tolerance of its bound is settled:
+                    # with linear middle_rows (segment interiors) the chord crossing is the maximum.
+                    if minima[e] < bound - HAUSDORFF_TOLERANCE:
+                        open_[e] = True
+                        kept += 1
+                if not found:
+                    break
+                # The whole round is bounded against the best value from before it.
+                best = round_best
+                if best > limit:
+                    break
+                next_ends = np.empty((2 * kept, 4))
+                next_lows = np.empty((2 * kept, width))
+                next_highs = np.empty((2 * kept, width))
+                next_values = np.empty((2 * kept, 2))
+                next_sides = np.empty(2 * kept, np.int64)
+                q = 0
+                for e in range(count):
+                    if not open_[e]:
+                        continue
+                    # The halves [start, middle] and [middle, end].
+                    next_sides[q] = next_sides[q + 1] = sides[e]
+                    next_ends[q, 0], next_ends[q, 1] = ends[e, 0], ends[e, 1]
+                    next_ends[q, 2], next_ends[q, 3] = middles[e, 0], middles[e, 1]
+                    next_ends[q + 1, 0], next_ends[q + 1, 1] = middles[e, 0], middles[e, 1]
+                    next_ends[q + 1, 2], next_ends[q + 1, 3] = ends[e, 2], ends[e, 3]
+                    for k in range(width):
+                        next_lows[q, k] = lows[e, k]
+                        next_highs[q, k] = next_lows[q + 1, k] = middle_rows[e, k]
+                        next_highs[q + 1, k] = highs[e, k]
+                    next_values[q, 0], next_values[q, 1] = values[e, 0], minima[e]
+                    next_values[q + 1, 0], next_values[q + 1, 1] = minima[e], values[e, 1]
+                    q += 2
+                ends, lows, highs, values, sides, count = (
+                    next_ends, next_lows, next_highs, next_values, next_sides, 2 * kept
+                )
+                rounds += 1
+        distances[p] = best
     return distances
 
 
@@ -441,160 +591,3 @@ def _projection_cut(points0, points1):  # pragma: no cover - compiled
                     vertices[written, 1] = points0[k, 1]
                     sources[written] = k
     return vertices, sources
-
-
-@numba.njit(cache=True)
-def _branch_and_bound(points0, points1, vertex_restricted, limit):  # pragma: no cover
-    """Return the symmetric Hausdorff distance of two non-empty polylines (continuous).
-
-    With ``vertex_restricted`` both are first restricted to each other (eq. 3); the
-    vertex-to-segment distances that choose the restriction are the same that start the
-    distance computation.
-
-    Both directed distances are found together by branch and bound along the edges of
-    the source curve, in rounds. On a piece ``[a, b]`` of an edge the distance ``d_j`` to
-    each target segment is convex, hence below its chord; for the segments ``i`` and ``j``
-    nearest to ``a`` and ``b``, the maximum of ``f = min_j d_j`` on the piece is at most
-    the crossing value of their chords (``max(f(a), f(b))`` when ``i`` serves both ends).
-    Pieces whose bound beats the best value found by more than ``HAUSDORFF_TOLERANCE``
-    are split at the chord crossing, which is exact when both distances are linear (to
-    segment interiors). Every ``d_j`` is 1-Lipschitz, so the bound exceeds ``f(a)`` by at
-    most the piece length: halving after ``_CHORD_SPLITS`` rounds ends the search.
-    """
-    count0, count1 = points0.shape[0], points1.shape[0]
-    table0, table1 = _segment_table(points0), _segment_table(points1)
-    to1 = _distance_rows(points0, table1)
-    to0 = _distance_rows(points1, table0)
-    # Vertex range [low, high] of each polyline taking part; the vertices of each measure
-    # against the other polyline's segments [first, stop).
-    low0, high0, low1, high1 = 0, count0 - 1, 0, count1 - 1
-    first1, stop1, first0, stop0 = 0, table1.shape[0], 0, table0.shape[0]
-    if vertex_restricted and count0 >= 2 and count1 >= 2:
-        low0, high0 = _span_of_rows(to0)
-        low1, high1 = _span_of_rows(to1)
-        first1, stop1, first0, stop0 = low1, high1, low0, high0
-    nearest0, argmin0 = _row_minima(to1, first1, stop1)
-    nearest1, argmin1 = _row_minima(to0, first0, stop0)
-    best = -math.inf
-    for v in range(low0, high0 + 1):
-        best = max(best, nearest0[v])
-    for v in range(low1, high1 + 1):
-        best = max(best, nearest1[v])
-    if best > limit:
-        return best
-    # A piece of an edge: its ends, the distances there to the target segments, their
-    # minima, and which polyline it belongs to. An edge whose ends have the same nearest
-    # segment is settled from the start (its bound is the larger end value, already in
-    # ``best``), so it is not even a piece.
-    width0, width1 = stop1 - first1, stop0 - first0
-    width = max(width0, width1)
-    count = 0
-    for v in range(low0, high0):
-        count += argmin0[v] != argmin0[v + 1]
-    for v in range(low1, high1):
-        count += argmin1[v] != argmin1[v + 1]
-    ends = np.empty((count, 4))
-    lows = np.empty((count, width))
-    highs = np.empty((count, width))
-    values = np.empty((count, 2))
-    sides = np.empty(count, np.int64)
-    piece = 0
-    for side in range(2):
-        points = points0 if side == 0 else points1
-        rows = to1 if side == 0 else to0
-        argmins = argmin0 if side == 0 else argmin1
-        nearest = nearest0 if side == 0 else nearest1
-        first = first1 if side == 0 else first0
-        size = width0 if side == 0 else width1
-        low = low0 if side == 0 else low1
-        high = high0 if side == 0 else high1
-        for v in range(low, high):
-            if argmins[v] != argmins[v + 1]:
-                ends[piece, 0], ends[piece, 1] = points[v, 0], points[v, 1]
-                ends[piece, 2], ends[piece, 3] = points[v + 1, 0], points[v + 1, 1]
-                for k in range(size):
-                    lows[piece, k] = rows[v, first + k]
-                    highs[piece, k] = rows[v + 1, first + k]
-                values[piece, 0], values[piece, 1] = nearest[v], nearest[v + 1]
-                sides[piece] = side
-                piece += 1
-    rounds = 0
-    while count > 0:
-        middles = np.empty((count, 2))
-        distances = np.empty((count, width))
-        minima = np.empty(count)
-        open_ = np.empty(count, np.bool_)
-        found = False
-        round_best = best
-        kept = 0
-        for p in range(count):
-            open_[p] = False
-            side = sides[p]
-            size = width0 if side == 0 else width1
-            fa, fb = values[p, 0], values[p, 1]
-            i, j = 0, 0  # the segments nearest to the ends (the lowest on ties)
-            for k in range(1, size):
-                if lows[p, k] < lows[p, i]:
-                    i = k
-                if highs[p, k] < highs[p, j]:
-                    j = k
-            # Chord of d_i runs from fa to end_i; chord of d_j from start_j to fb.
-            end_i, start_j = highs[p, i], lows[p, j]
-            lead = start_j - fa
-            crossing = lead / ((end_i - fb) + lead + _TINY)  # in [0, 1]; 0 when i == j
-            bound = max(fa + crossing * (end_i - fa), fb)
-            if bound <= best + HAUSDORFF_TOLERANCE:
-                continue
-            found = True
-            split = crossing if rounds < _CHORD_SPLITS else 0.5
-            split = min(max(split, _MIN_SPLIT), 1.0 - _MIN_SPLIT)
-            mx = ends[p, 0] + split * (ends[p, 2] - ends[p, 0])
-            my = ends[p, 1] + split * (ends[p, 3] - ends[p, 1])
-            middles[p, 0], middles[p, 1] = mx, my
-            table = table1 if side == 0 else table0
-            first = first1 if side == 0 else first0
-            for k in range(size):
-                distances[p, k], _ = _to_segment(mx, my, table, first + k)
-            minimum = distances[p, 0]
-            for k in range(1, size):
-                minimum = min(minimum, distances[p, k])
-            minima[p] = minimum
-            round_best = max(round_best, minima[p])
-            # A piece whose new point comes within the tolerance of its bound is settled:
-            # with linear distances (segment interiors) the chord crossing is the maximum.
-            if minima[p] < bound - HAUSDORFF_TOLERANCE:
-                open_[p] = True
-                kept += 1
-        if not found:
-            return best
-        # The whole round is bounded against the best value from before it.
-        best = round_best
-        if best > limit:
-            return best
-        next_ends = np.empty((2 * kept, 4))
-        next_lows = np.empty((2 * kept, width))
-        next_highs = np.empty((2 * kept, width))
-        next_values = np.empty((2 * kept, 2))
-        next_sides = np.empty(2 * kept, np.int64)
-        q = 0
-        for p in range(count):
-            if not open_[p]:
-                continue
-            # The halves [start, middle] and [middle, end].
-            next_sides[q] = next_sides[q + 1] = sides[p]
-            next_ends[q, 0], next_ends[q, 1] = ends[p, 0], ends[p, 1]
-            next_ends[q, 2], next_ends[q, 3] = middles[p, 0], middles[p, 1]
-            next_ends[q + 1, 0], next_ends[q + 1, 1] = middles[p, 0], middles[p, 1]
-            next_ends[q + 1, 2], next_ends[q + 1, 3] = ends[p, 2], ends[p, 3]
-            for k in range(width):
-                next_lows[q, k] = lows[p, k]
-                next_highs[q, k] = next_lows[q + 1, k] = distances[p, k]
-                next_highs[q + 1, k] = highs[p, k]
-            next_values[q, 0], next_values[q, 1] = values[p, 0], minima[p]
-            next_values[q + 1, 0], next_values[q + 1, 1] = minima[p], values[p, 1]
-            q += 2
-        ends, lows, highs, values, sides, count = (
-            next_ends, next_lows, next_highs, next_values, next_sides, 2 * kept
-        )
-        rounds += 1
-    return best

@@ -432,8 +432,13 @@ def _through_polylines(
     """
     count = which.size
     beams = ranges.size
-    counts = np.zeros((count, 3), np.int64)
-    piece_counts = np.full(count, -1, np.int64)
+    # Filled by loops: np.zeros and np.full of these shapes would each compile library
+    # code for this kernel alone at first use.
+    counts = np.empty((count, 3), np.int64)
+    piece_counts = np.empty(count, np.int64)
+    for p in range(count):
+        counts[p, 0] = counts[p, 1] = counts[p, 2] = 0
+        piece_counts[p] = -1
     pieces = np.empty((count + 4, 2))
     stored = 0
     robust = np.zeros(beams, np.bool_)
