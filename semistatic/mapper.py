@@ -21,9 +21,13 @@ life cycle (DESIGN.md detail 10):
 Two choices beyond the paper: association compares the scan polylines as extracted, but
 what is merged or inserted has its ends moved half a beam gap outward
 (:func:`semistatic.visibility.extend_ends`), which removes the shrinking of objects by the
-beam spacing; and a map polyline moves toward each observation by
-``1 / (1 + min(hits, MAX_MERGE_WEIGHT))`` (see :func:`semistatic.merge.merge`). Joins use
-the projection restriction unless ``join_mode`` says otherwise.
+beam spacing; and each edge of a map polyline moves toward each observation by
+``1 / (1 + w)``, ``w`` the observations along that edge so far (``MapPolyline.support``,
+see :func:`semistatic.merge.merge_weighted`). Joins use the projection restriction unless
+``join_mode`` says otherwise, and merge a group into its heaviest member by
+:attr:`MapPolyline.weight` (hits, but no more than its most observed edge): by hits alone
+a stub cut off a long wall, which keeps the wall's hits, was the heaviest and bent the
+box joined to it onto the stub.
 
 Ids are integers, never reused. The map has no notion of safety areas; a ``keep``
 predicate decides which new polylines are inserted (see :class:`semistatic.local_map.LocalMap`).
@@ -143,6 +147,27 @@ class MapPolyline:
         if self.support is not None and self.support.shape == (edges,):
             return self.support
         return np.full(edges, float(min(self.hits, MAX_MERGE_WEIGHT)))
+
+    @property
+    def weight(self) -> float:
+        """Return how many observations the polyline stands for: hits, at most its best edge's.
+
+        The hit count says how often the polyline was associated, not how often each part
+        of it was seen: a piece cut off a long wall keeps the wall's hits although its one
+        edge was seen a few times. Where the edges' weights are known, none counts more
+        than the most observed edge; a polyline of one vertex weighs its hits.
+
+        Examples
+        --------
+        >>> stub = Polyline([[0.0, 0.0], [0.3, 0.0]])
+        >>> MapPolyline(0, stub, hits=900, support=np.array([4.0])).weight
+        4.0
+        >>> MapPolyline(0, stub, hits=900).weight   # edges unknown: its hits (at most 1000)
+        900.0
+        """
+        weights = self.edge_weights
+        hits = float(min(self.hits, MAX_MERGE_WEIGHT))
+        return min(hits, float(weights.max())) if weights.size else hits
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "polyline", as_polyline(self.polyline))
@@ -693,7 +718,12 @@ class PolylineMap:
         if not groups:
             return []
         entries = [self._entries[map_id] for map_id in ids]
-        weights = [min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries]
+        # Not by hits alone: a piece cut off a long wall keeps the wall's hits (module
+        # docstring).
+        weights = [0.0] * len(entries)
+        for members in groups:
+            for k in members:
+                weights[k] = entries[k].weight
         epsilon = self.params.epsilon
         joined = []
         for members in groups:
