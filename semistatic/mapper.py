@@ -21,9 +21,13 @@ life cycle (DESIGN.md detail 10):
 Two choices beyond the paper: association compares the scan polylines as extracted, but
 what is merged or inserted has its ends moved half a beam gap outward
 (:func:`semistatic.visibility.extend_ends`), which removes the shrinking of objects by the
-beam spacing; and a map polyline moves toward each observation by
-``1 / (1 + min(hits, MAX_MERGE_WEIGHT))`` (see :func:`semistatic.merge.merge`). Joins use
-the projection restriction unless ``join_mode`` says otherwise.
+beam spacing; and each edge of a map polyline moves toward each observation by
+``1 / (1 + w)``, ``w`` the observations along that edge so far (``MapPolyline.support``,
+see :func:`semistatic.merge.merge_weighted`). Joins use the projection restriction unless
+``join_mode`` says otherwise, and merge a group into its heaviest member by
+:attr:`MapPolyline.weight` (hits, but no more than its most observed edge): by hits alone
+a stub cut off a long wall, which keeps the wall's hits, was the heaviest and bent the
+box joined to it onto the stub.
 
 Ids are integers, never reused. The map has no notion of safety areas; a ``keep``
 predicate decides which new polylines are inserted (see :class:`semistatic.local_map.LocalMap`).
@@ -47,7 +51,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import NamedTuple
 
@@ -58,7 +62,7 @@ from numpy.typing import ArrayLike
 from semistatic.association import associate_boxed, bounding_boxes
 from semistatic.extraction import extract_polylines
 from semistatic.join import merge_group, overlapping_groups
-from semistatic.merge import END_TOLERANCE_FACTOR, merge_observations
+from semistatic.merge import END_TOLERANCE_FACTOR, merge_weighted, transfer_weights
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
 from semistatic.polyline import PackedPolylines, Polyline, as_polyline, pack_vertices, run_boxes
 from semistatic.types import Scan
@@ -107,6 +111,11 @@ class MapPolyline:
         Consecutive scans it was missed in while it should have been visible.
     first_seen, last_seen
         Stamps (s) of the first and the last scan that observed it.
+    support
+        ``(N - 1,)`` how many observations saw each edge (fractional where edges were
+        joined: length-weighted), the per-edge weight of
+        :func:`semistatic.merge.merge_weighted`; ``None`` when unknown (a polyline built
+        elsewhere): then :attr:`edge_weights` takes ``hits`` for every edge.
 
     Examples
     --------
@@ -123,6 +132,42 @@ class MapPolyline:
     misses: int = 0
     first_seen: float = 0.0
     last_seen: float = 0.0
+    support: np.ndarray | None = field(default=None, compare=False)
+
+    @property
+    def edge_weights(self) -> np.ndarray:
+        """Return :attr:`support`, or ``hits`` per edge where it is unknown or stale.
+
+        Examples
+        --------
+        >>> MapPolyline(0, Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), hits=4).edge_weights
+        array([4., 4.])
+        """
+        edges = max(len(self.polyline) - 1, 0)
+        if self.support is not None and self.support.shape == (edges,):
+            return self.support
+        return np.full(edges, float(min(self.hits, MAX_MERGE_WEIGHT)))
+
+    @property
+    def weight(self) -> float:
+        """Return how many observations the polyline stands for: hits, at most its best edge's.
+
+        The hit count says how often the polyline was associated, not how often each part
+        of it was seen: a piece cut off a long wall keeps the wall's hits although its one
+        edge was seen a few times. Where the edges' weights are known, none counts more
+        than the most observed edge; a polyline of one vertex weighs its hits.
+
+        Examples
+        --------
+        >>> stub = Polyline([[0.0, 0.0], [0.3, 0.0]])
+        >>> MapPolyline(0, stub, hits=900, support=np.array([4.0])).weight
+        4.0
+        >>> MapPolyline(0, stub, hits=900).weight   # edges unknown: its hits (at most 1000)
+        900.0
+        """
+        weights = self.edge_weights
+        hits = float(min(self.hits, MAX_MERGE_WEIGHT))
+        return min(hits, float(weights.max())) if weights.size else hits
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "polyline", as_polyline(self.polyline))
@@ -133,6 +178,15 @@ class MapPolyline:
             if not (isinstance(value, int | np.integer) and value >= 0):
                 raise ValueError(f"MapPolyline.{name} must be an integer >= 0, got {value!r}")
             object.__setattr__(self, name, int(value))
+        if self.support is not None:
+            support = np.array(self.support, dtype=float)
+            if support.shape != (max(len(self.polyline) - 1, 0),) or not (support >= 0).all():
+                raise ValueError(
+                    "MapPolyline.support must hold one weight >= 0 per edge, got "
+                    f"{self.support!r}"
+                )
+            support.flags.writeable = False
+            object.__setattr__(self, "support", support)
 
 
 def _replaced(entry: MapPolyline, **changes: object) -> MapPolyline:
@@ -140,7 +194,10 @@ def _replaced(entry: MapPolyline, **changes: object) -> MapPolyline:
 
     Only for the update's own changes, which are valid by construction (a polyline, a
     status from ``STATUSES``, counts >= 0): a map update replaces every entry it touches.
+    A new polyline without a new ``support`` has none (its edge weights are unknown).
     """
+    if "polyline" in changes and "support" not in changes:
+        changes["support"] = None
     copy = object.__new__(MapPolyline)
     copy.__dict__.update(entry.__dict__)
     copy.__dict__.update(changes)
@@ -290,8 +347,9 @@ class PolylineMap:
         """
         map_id = self._next_id
         self._next_id += 1
+        line = as_polyline(polyline)
         self._entries[map_id] = MapPolyline(
-            map_id, as_polyline(polyline), "new", 1, 0, stamp, stamp
+            map_id, line, "new", 1, 0, stamp, stamp, support=np.ones(max(len(line) - 1, 0))
         )
         return map_id
 
@@ -572,23 +630,39 @@ class PolylineMap:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
         epsilon = self.params.epsilon
         entries = [self._entries[map_id] for map_id in by_map]
-        merged = merge_observations(
+        merged = merge_weighted(
             [entry.polyline for entry in entries],
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
-            map_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
+            map_weights=[entry.edge_weights for entry in entries],
+            end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )
-        for entry, line in zip(entries, merged, strict=True):
+        for entry, (line, support) in zip(entries, merged, strict=True):
             self._entries[entry.id] = _replaced(
                 entry,
                 polyline=line,
+                support=support if len(line) > 1 else None,
                 status="confirmed",
                 hits=entry.hits + 1,
                 misses=0,
                 last_seen=stamp,
             )
         return set(by_map)
+
+    def _weights_along(self, line: Polyline, parts: list[MapPolyline]) -> np.ndarray | None:
+        """Return the edge weights ``line`` takes over from the entries it was made of.
+
+        (Within the merge's end tolerance: what merge averages lies that close.)
+        """
+        if len(line) < 2:
+            return None
+        tolerance = END_TOLERANCE_FACTOR * self.params.epsilon
+        total = np.zeros(len(line) - 1)
+        for part in parts:
+            if len(part.polyline) > 1:
+                total += transfer_weights(line, part.polyline, part.edge_weights, tolerance)
+        return total
 
     def _polylines_of(self, ids: list[int]) -> list[Polyline]:
         return [self._entries[map_id].polyline for map_id in ids]
@@ -620,7 +694,10 @@ class PolylineMap:
                 shapely.distance(shapely.LineString(piece.points), observation)
                 for piece in pieces
             ]))
-            self._entries[map_id] = _replaced(entry, polyline=pieces[nearest])
+            self._entries[map_id] = _replaced(
+                entry, polyline=pieces[nearest],
+                support=self._weights_along(pieces[nearest], [entry]),
+            )
             # Unobserved pieces of an observed polyline count a miss; of an unobserved one,
             # all keep its state.
             other = {} if observation is None else {
@@ -630,7 +707,8 @@ class PolylineMap:
                 if k == nearest:
                     continue
                 self._entries[self._next_id] = _replaced(
-                    entry, id=self._next_id, polyline=piece, **other
+                    entry, id=self._next_id, polyline=piece,
+                    support=self._weights_along(piece, [entry]), **other
                 )
                 added.append(self._next_id)
                 self._next_id += 1
@@ -657,7 +735,12 @@ class PolylineMap:
         if not groups:
             return []
         entries = [self._entries[map_id] for map_id in ids]
-        weights = [min(entry.hits, MAX_MERGE_WEIGHT) for entry in entries]
+        # Not by hits alone: a piece cut off a long wall keeps the wall's hits (module
+        # docstring).
+        weights = [0.0] * len(entries)
+        for members in groups:
+            for k in members:
+                weights[k] = entries[k].weight
         epsilon = self.params.epsilon
         joined = []
         for members in groups:
@@ -676,6 +759,7 @@ class PolylineMap:
             self._entries[survivor.id] = _replaced(
                 survivor,
                 polyline=line,
+                support=self._weights_along(line, parts),
                 status=status,
                 hits=sum(part.hits for part in parts),
                 misses=0 if touched else min(part.misses for part in parts),

@@ -55,7 +55,9 @@ __all__ = [
     "merge",
     "merge_observation",
     "merge_observations",
+    "merge_weighted",
     "project_onto",
+    "transfer_weights",
 ]
 
 # Default end tolerance in units of the Douglas-Peucker epsilon. Scan ends wander by beam
@@ -96,11 +98,17 @@ def _distinct(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
 
     Each vertex is compared with the one before it in the input.
     """
+    return points[_distinct_mask(points)]
+
+
+@numba.njit(cache=True)
+def _distinct_mask(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """Return which of ``points`` :func:`_distinct` keeps."""
     keep = np.ones(points.shape[0], dtype=np.bool_)
     for k in range(1, points.shape[0]):
         dx, dy = points[k, 0] - points[k - 1, 0], points[k, 1] - points[k - 1, 1]
         keep[k] = dx * dx + dy * dy > DUPLICATE_DISTANCE**2
-    return points[keep]
+    return keep
 
 
 @numba.njit(cache=True)
@@ -286,7 +294,7 @@ def merge(
     3
     """
     return _merged_parts("merge", [map_polyline], [[scan_polyline]], epsilon, [map_weight],
-                         end_tolerance)[0]
+                         end_tolerance)[0][0]
 
 
 def merge_observation(
@@ -312,7 +320,7 @@ def merge_observation(
            [4.  , 0.01]])
     """
     return _merged_parts("merge_observation", [map_polyline], [parts], epsilon, [map_weight],
-                         end_tolerance)[0]
+                         end_tolerance)[0][0]
 
 
 def merge_observations(
@@ -337,8 +345,81 @@ def merge_observations(
     ...  for line in merge_observations(walls, seen, 0.03, map_weights=[1.0, 3.0])]
     [[[0.0, 0.01], [2.0, 0.01]], [[0.0, 1.005], [3.0, 1.02]]]
     """
-    return _merged_parts("merge_observations", map_polylines, observations, epsilon,
-                         map_weights, end_tolerance)
+    return [line for line, _ in _merged_parts("merge_observations", map_polylines,
+                                               observations, epsilon, map_weights,
+                                               end_tolerance)]
+
+
+def merge_weighted(
+    map_polylines: Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
+    epsilon: float,
+    *,
+    map_weights: Sequence[float | ArrayLike],
+    end_weights: Sequence[float] | None = None,
+    end_tolerance: float | None = None,
+) -> list[tuple[Polyline, np.ndarray]]:
+    """Return :func:`merge_observations` with the edge weights of each merged polyline.
+
+    The map is averaged edge by edge (issue 10, Build item 4): ``map_weights[k]`` holds
+    one weight per edge of ``map_polylines[k]`` (or one number for all of them), how many
+    observations saw that edge so far; each scan edge is one more. Where the scan lies
+    along a map edge, the map moves toward it by the scan's share of the weight there,
+    ``1 / (1 + w)``. Every edge of the result weighs what of the map and of the scan lies
+    along it (length-weighted where re-simplification joins edges), so a well observed
+    face converges while a face seen only lately - or a chord that bridged a gap to an
+    extension, which no observation supports: weight 0 - follows the views that see it.
+    A whole-polyline weight (the hit count) would freeze such a face at its first view.
+
+    The ends are averaged as the whole polyline's: ``end_weights[k]`` (e.g. the hit
+    count; default: a number given as ``map_weights[k]``, else the mean edge weight) is
+    what an end, and a polyline that is a single vertex, weighs against a scan's end. An
+    end keeps the reach that many views gave it against a few that stop short of it by
+    beam spacing, whatever the weight of its last edge.
+
+    Examples
+    --------
+    >>> box = [[0.8, 0.0], [1.0, -0.1], [1.0, -1.0]]  # a chord no view supported, a face
+    >>> corner_seen = [[0.85, 0.0], [1.0, 0.0], [1.0, -1.0]]
+    >>> [(line.points.round(3).tolist(), weights.round(2).tolist()) for line, weights
+    ...  in merge_weighted([box], [[corner_seen]], 0.03, map_weights=[[0.0, 20.0]],
+    ...                    end_weights=[20.0])]
+    [([[0.802, 0.0], [1.0, 0.0], [1.0, -1.0]], [1.0, 19.0])]
+    >>> merge(box, corner_seen, 0.03, map_weight=20.0).points.round(3)  # one weight: kept
+    array([[ 0.802,  0.   ],
+           [ 1.   , -0.1  ],
+           [ 1.   , -1.   ]])
+    """
+    return _merged_parts("merge_weighted", map_polylines, observations, epsilon,
+                         map_weights, end_tolerance, end_weights)
+
+
+def transfer_weights(
+    polyline: Polyline | ArrayLike, source: Polyline | ArrayLike, weights: ArrayLike,
+    tolerance: float,
+) -> np.ndarray:
+    """Return the edge weights ``polyline`` takes over from ``source`` (e.g. a piece of it).
+
+    Each edge of ``polyline`` takes the weight of the ``source`` edge its midpoint lies
+    on, within ``tolerance`` (m) and inside the source's extent; elsewhere 0.
+    ``weights`` holds one value per edge of ``source``.
+
+    Examples
+    --------
+    >>> box = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]
+    >>> transfer_weights([[0.5, 0.0], [1.0, 0.0], [1.0, 0.5], [1.0, 2.0]], box, [7.0, 9.0], 0.05)
+    array([7., 9., 0.])
+    """
+    points = np.ascontiguousarray(as_polyline(polyline).points)
+    vertices = as_polyline(source).points
+    weights = np.asarray(weights, dtype=float).reshape(-1)
+    if weights.size != max(vertices.shape[0] - 1, 0):
+        raise ValueError(
+            f"transfer_weights: need one weight per source edge ({max(vertices.shape[0] - 1, 0)}),"
+            f" got {weights.size}"
+        )
+    distinct, distinct_weights = _distinct_weighted(vertices, weights)
+    return _transfer(points, distinct, distinct_weights, float(tolerance))
 
 
 def _merged_parts(
@@ -346,92 +427,159 @@ def _merged_parts(
     map_polylines: Sequence[Polyline | ArrayLike],
     observations: Sequence[Sequence[Polyline | ArrayLike]],
     epsilon: float,
-    map_weights: Sequence[float],
+    map_weights: Sequence[float | ArrayLike],
     end_tolerance: float | None,
-) -> list[Polyline]:
-    """Return :func:`merge_observations` with its parameters checked once for ``caller``."""
+    end_weights: Sequence[float] | None = None,
+) -> list[tuple[Polyline, np.ndarray]]:
+    """Return :func:`merge_weighted` with its parameters checked once for ``caller``."""
     if not epsilon > 0.0:
         raise ValueError(f"{caller}: epsilon must be > 0 m, got {epsilon!r}")
-    weights = np.asarray(map_weights, dtype=float).reshape(-1)
-    if not (weights >= 0.0).all():
-        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights!r}")
     tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
     if not tolerance >= 0.0:
         raise ValueError(f"{caller}: end_tolerance must be >= 0 m, got {end_tolerance!r}")
     lines = [as_polyline(line) for line in map_polylines]
-    if not (len(lines) == len(observations) == weights.size):
+    if not (len(lines) == len(observations) == len(map_weights)):
         raise ValueError(
             f"{caller}: need one observation and one weight per map polyline, got "
-            f"{len(lines)} polylines, {len(observations)} observations, {weights.size} weights"
+            f"{len(lines)} polylines, {len(observations)} observations, "
+            f"{len(map_weights)} weights"
         )
-    alphas = 1.0 / (1.0 + weights)  # weights >= 0: no division by zero; inf gives 0
-    parts = [[as_polyline(part).points for part in parts] for parts in observations]
+    edge_weights, point_weights = [], np.ones(len(lines))
+    for k, (line, weight) in enumerate(zip(lines, map_weights, strict=True)):
+        weight = np.asarray(weight, dtype=float)
+        edges = max(len(line) - 1, 0)
+        if weight.ndim == 0:
+            point_weights[k] = weight
+            weight = np.full(edges, float(weight))
+        elif weight.shape != (edges,):
+            raise ValueError(
+                f"{caller}: map weights of polyline {k} need one value per edge ({edges}), "
+                f"got shape {weight.shape}"
+            )
+        elif edges:
+            point_weights[k] = weight.mean()
+        if end_weights is not None:
+            point_weights[k] = end_weights[k]
+        if not (weight >= 0.0).all() or not point_weights[k] >= 0.0:
+            raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
+        edge_weights.append(weight)
+    parts = [[as_polyline(part) for part in line_parts] for line_parts in observations]
+    flat_parts = [part for line_parts in parts for part in line_parts]
     points, offsets = pack_vertices([line.points for line in lines])
-    part_points, part_offsets = pack_vertices([part for line_parts in parts for part in line_parts])
+    weights, weight_offsets = _pack_weights(edge_weights)
+    part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
+    # Each scan edge is one observation of the surface it lies along.
+    part_weights, part_weight_offsets = _pack_weights(
+        [np.ones(max(len(part) - 1, 0)) for part in flat_parts]
+    )
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
     first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
-    merged, merged_offsets, changed = _merge_all(
-        points, offsets, part_points, part_offsets, first_parts, alphas, tolerance, epsilon
+    merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
+        points, offsets, weights, weight_offsets, part_points, part_offsets, part_weights,
+        part_weight_offsets, first_parts, point_weights, tolerance, epsilon,
     )
-    bounds = merged_offsets.tolist()
+    bounds, weight_bounds = merged_offsets.tolist(), merged_weight_offsets.tolist()
     # Views of the one fresh array, frozen once (scan indices: vertex order).
     views = Polyline._views(merged, bounds, [
         _vertex_order(stop - start) for start, stop in itertools.pairwise(bounds)
     ])
     return [
-        view if is_changed else line
-        for line, view, is_changed in zip(lines, views, changed.tolist(), strict=True)
+        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]].copy())
+        if is_changed else (line, edge_weights[k])
+        for k, (line, view, is_changed) in enumerate(
+            zip(lines, views, changed.tolist(), strict=True)
+        )
     ]
+
+
+def _pack_weights(weights: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Return per-polyline weight arrays one after the other and their offsets."""
+    offsets = run_offsets((array.size for array in weights), len(weights))
+    packed = np.concatenate(weights) if weights else np.empty(0)
+    return np.ascontiguousarray(packed, dtype=float), offsets
 
 
 @numba.njit(cache=True)
 def _merge_all(
-    points: np.ndarray, offsets: np.ndarray, part_points: np.ndarray,
-    part_offsets: np.ndarray, first_parts: np.ndarray, alphas: np.ndarray, tolerance: float,
-    epsilon: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    points: np.ndarray, offsets: np.ndarray, weights: np.ndarray, weight_offsets: np.ndarray,
+    part_points: np.ndarray, part_offsets: np.ndarray, part_weights: np.ndarray,
+    part_weight_offsets: np.ndarray, first_parts: np.ndarray, point_weights: np.ndarray,
+    tolerance: float, epsilon: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """Merge each packed map polyline with its packed parts in turn (:func:`merge`).
 
-    Returns the merged vertices one polyline after the other, their offsets and which
-    polylines changed (an observation without vertices changes nothing).
+    ``weights`` / ``part_weights``: the packed edge weights of the map polylines and of
+    the parts; ``point_weights``: the weight of each map polyline that is one vertex (a
+    part's single vertex weighs 1). Returns the merged vertices one polyline after the
+    other, their offsets, their edge weights, the weights' offsets and which polylines
+    changed (an observation without vertices changes nothing).
     """
     count = offsets.size - 1
     merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
+    merged_weights = np.empty(max(points.shape[0] + part_points.shape[0], 1))
     merged_offsets = np.zeros(count + 1, np.int64)
+    merged_weight_offsets = np.zeros(count + 1, np.int64)
     changed = np.zeros(count, np.bool_)
-    stored = 0
+    stored, stored_weights = 0, 0
     for k in range(count):
         line = points[offsets[k] : offsets[k + 1]].copy()
+        line_weights = weights[weight_offsets[k] : weight_offsets[k + 1]].copy()
+        line_totals = line_weights.copy()
         for part in range(first_parts[k], first_parts[k + 1]):
             scan = part_points[part_offsets[part] : part_offsets[part + 1]].copy()
             if not scan.shape[0]:
                 continue  # an empty scan polyline leaves the map polyline itself
-            old, new = _distinct(line), _distinct(scan)
+            scan_weights = part_weights[part_weight_offsets[part] : part_weight_offsets[part + 1]]
+            old, old_weights = _distinct_weighted(line, line_weights)
+            old, old_totals = _distinct_weighted(line, line_totals)
+            new, new_weights = _distinct_weighted(scan, scan_weights.copy())
             if old.shape[0] == 0:
-                line = new
+                line, line_weights, line_totals = new, np.zeros(new_weights.size), new_weights
             elif old.shape[0] == 1 and new.shape[0] == 1:
                 line = old.copy()
-                line[0, 0] += alphas[k] * (new[0, 0] - old[0, 0])
-                line[0, 1] += alphas[k] * (new[0, 1] - old[0, 1])
+                alpha = _share(1.0, point_weights[k])
+                line[0, 0] += alpha * (new[0, 0] - old[0, 0])
+                line[0, 1] += alpha * (new[0, 1] - old[0, 1])
+                line_weights, line_totals = np.empty(0), np.empty(0)
             elif old.shape[0] == 1:
                 # A point has no extent to average: the scan's shape wins, the point may
                 # extend it.
                 line = _extend_with_point(new, old[0], tolerance)
+                line_totals = _transfer(line, new, new_weights, tolerance)
+                line_weights = np.zeros(line_totals.size)
             elif new.shape[0] == 1:
                 line = _extend_with_point(old, new[0], tolerance)
+                line_weights = _transfer(line, old, old_weights, tolerance)
+                line_totals = _transfer(line, old, old_totals, tolerance)
             else:
-                line = _merged(old, new, alphas[k], tolerance, epsilon)
+                line, line_weights, line_totals = _merged(
+                    old, old_weights, old_totals, new, new_weights, point_weights[k], tolerance,
+                    epsilon
+                )
             # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
-            line = line[douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)]
+            kept = douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)
+            line_weights = _kept_weights(line, line_weights, kept)
+            line_totals = _kept_weights(line, line_totals, kept)
+            line = line[kept]
             changed[k] = True
         if stored + line.shape[0] > merged.shape[0]:
             grown = np.empty((2 * (stored + line.shape[0]), 2))
             _put_rows(merged, 0, stored, grown, 0)
             merged = grown
+        line_weights = line_totals
+        if stored_weights + line_weights.size > merged_weights.size:
+            grown_weights = np.empty(2 * (stored_weights + line_weights.size))
+            for edge in range(stored_weights):
+                grown_weights[edge] = merged_weights[edge]
+            merged_weights = grown_weights
         _put_rows(line, 0, line.shape[0], merged, stored)
+        for edge in range(line_weights.size):
+            merged_weights[stored_weights + edge] = line_weights[edge]
         stored += line.shape[0]
+        stored_weights += line_weights.size
         merged_offsets[k + 1] = stored
-    return merged, merged_offsets, changed
+        merged_weight_offsets[k + 1] = stored_weights
+    return merged, merged_offsets, merged_weights, merged_weight_offsets, changed
 
 
 @numba.njit(cache=True)
@@ -576,10 +724,19 @@ def _cut_corner(
 
 @numba.njit(cache=True)
 def _merged(
-    old: np.ndarray, new: np.ndarray, alpha: float, tolerance: float, epsilon: float
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 rows)."""
+    old: np.ndarray, old_weights: np.ndarray, old_totals: np.ndarray, new: np.ndarray,
+    new_weights: np.ndarray, end_weight: float, tolerance: float, epsilon: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 rows).
+
+    ``old_weights`` are the edge weights of ``old`` before this observation (the map's
+    side of each average: the parts of one observation all weigh against them),
+    ``old_totals`` with the parts of this observation merged so far, ``new_weights`` the
+    scan's. Returns the candidates and, per candidate edge, the weights of ``old`` and
+    the totals with the scan's added where each lies along them (0 where nothing does).
+    """
     cut = True
+    source, source_weights, source_totals = old, old_weights, old_totals
     while True:
         arcs, feet, distances, before, after = _project(new, old)
         if arcs[0] > arcs[-1] or (
@@ -588,7 +745,7 @@ def _merged(
             + (new[-1, 1] - new[0, 1]) * (old[-1, 1] - old[0, 1])
             < 0.0
         ):
-            new = new[::-1].copy()
+            new, new_weights = new[::-1].copy(), new_weights[::-1].copy()
             arcs, feet, distances = arcs[::-1].copy(), feet[::-1].copy(), distances[::-1].copy()
             before, after = before[::-1].copy(), after[::-1].copy()
         if not cut:
@@ -598,11 +755,17 @@ def _merged(
         if kept.shape[0] == 0:
             break
         old = kept
-    _, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
-    # Map vertices facing the scan move toward it.
+        old_weights = _transfer(old, source, source_weights, tolerance)
+        old_totals = _transfer(old, source, source_totals, tolerance)
+    scan_arcs, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
+    map_arcs = _arc_starts(old)
+    scan_starts = _arc_starts(new)
+    # Map vertices facing the scan move toward it, by the scan's share of the weight there.
     moved = old.copy()
     for k in range(old.shape[0]):
         if not (scan_before[k] or scan_after[k]) and scan_distances[k] <= tolerance:
+            alpha = _share(new_weights[_edge_at(scan_starts, scan_arcs[k])],
+                           _vertex_weight(old_weights, k))
             moved[k, 0] += alpha * (scan_feet[k, 0] - old[k, 0])
             moved[k, 1] += alpha * (scan_feet[k, 1] - old[k, 1])
     # Scan vertices facing the map are inserted, pulled toward the map by its weight.
@@ -611,13 +774,13 @@ def _merged(
         inserted[k] = not (before[k] or after[k])
     count = new.shape[0]
     prepend, append = 0, 0
-    map_arcs = _arc_starts(old)
 
     # Start: by how much does the scan reach beyond the map's start?
     reach = distances[0] if before[0] else -arcs[0]
     if reach > tolerance:
         prepend = _run_length(before)
     elif reach >= -tolerance:
+        alpha = _share(new_weights[0], end_weight)
         moved[0, 0] = old[0, 0] + alpha * (new[0, 0] - old[0, 0])
         moved[0, 1] = old[0, 1] + alpha * (new[0, 1] - old[0, 1])
         inserted[0] = False
@@ -626,6 +789,7 @@ def _merged(
     if reach > tolerance:
         append = _run_length(after[::-1].copy())
     elif reach >= -tolerance:
+        alpha = _share(new_weights[-1], end_weight)
         moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
         moved[-1, 1] = old[-1, 1] + alpha * (new[-1, 1] - old[-1, 1])
         inserted[-1] = False
@@ -654,6 +818,8 @@ def _merged(
             if found:
                 anchor_x, anchor_y = corner_x, corner_y
         keys[row] = arcs[k]
+        alpha = _share(_vertex_weight(new_weights, k),
+                       old_weights[_edge_at(map_arcs, arcs[k])])
         middle[row, 0] = anchor_x + alpha * (new[k, 0] - anchor_x)
         middle[row, 1] = anchor_y + alpha * (new[k, 1] - anchor_y)
         row += 1
@@ -683,4 +849,84 @@ def _merged(
         gap = math.hypot(candidates[k, 0] - candidates[k - 1, 0],
                          candidates[k, 1] - candidates[k - 1, 1])
         keep[k] = gap > DUPLICATE_DISTANCE
-    return candidates[:size][keep]
+    candidates = candidates[:size][keep]
+    totals = _transfer(candidates, old, old_totals, tolerance)
+    totals += _transfer(candidates, new, new_weights, tolerance)
+    return candidates, _transfer(candidates, old, old_weights, tolerance), totals
+
+
+@numba.njit(cache=True)
+def _share(scan_weight: float, map_weight: float) -> float:  # pragma: no cover - compiled
+    """Return how far the map moves toward the scan: the scan's share of the weight."""
+    total = scan_weight + map_weight
+    return scan_weight / total if total > 0.0 else 0.5
+
+
+@numba.njit(cache=True)
+def _edge_at(starts: np.ndarray, arc: float) -> int:  # pragma: no cover - compiled
+    """Return the edge at arc length ``arc`` of a polyline with vertex arcs ``starts``."""
+    edge = np.searchsorted(starts, arc, side="right") - 1
+    return min(max(edge, 0), starts.size - 2)
+
+
+@numba.njit(cache=True)
+def _vertex_weight(weights: np.ndarray, vertex: int) -> float:  # pragma: no cover - compiled
+    """Return a vertex's weight: the mean of its edges' (an end vertex: its one edge's)."""
+    if vertex == 0:
+        return weights[0]
+    if vertex == weights.size:
+        return weights[-1]
+    return 0.5 * (weights[vertex - 1] + weights[vertex])
+
+
+@numba.njit(cache=True)
+def _transfer(
+    points: np.ndarray, source: np.ndarray, weights: np.ndarray, tolerance: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return, per edge of ``points``, the weight of the ``source`` edge it lies along.
+
+    An edge lies along the ``source`` edge its midpoint projects onto, within
+    ``tolerance`` and inside the source's extent; elsewhere its weight is 0 (nothing of
+    ``source`` supports it). ``source`` has distinct vertices, ``weights`` one per edge.
+    """
+    edges = max(points.shape[0] - 1, 0)
+    found = np.zeros(edges)
+    if edges == 0 or source.shape[0] < 2:
+        return found
+    middles = np.empty((edges, 2))
+    for k in range(edges):
+        middles[k, 0] = 0.5 * (points[k, 0] + points[k + 1, 0])
+        middles[k, 1] = 0.5 * (points[k, 1] + points[k + 1, 1])
+    arcs, _, distances, before, after = _project(middles, source)
+    starts = _arc_starts(source)
+    for k in range(edges):
+        if distances[k] <= tolerance and not (before[k] or after[k]):
+            found[k] = weights[_edge_at(starts, arcs[k])]
+    return found
+
+
+@numba.njit(cache=True)
+def _kept_weights(
+    points: np.ndarray, weights: np.ndarray, kept: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the edge weights of ``points[kept]``: each its edges' length-weighted mean."""
+    found = np.zeros(max(kept.size - 1, 0))
+    for k in range(kept.size - 1):
+        total, length = 0.0, 0.0
+        for edge in range(kept[k], kept[k + 1]):
+            piece = _edge_length(points, edge)
+            total += weights[edge] * piece
+            length += piece
+        found[k] = total / length if length > 0.0 else weights[kept[k]]
+    return found
+
+
+@numba.njit(cache=True)
+def _distinct_weighted(
+    points: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return :func:`_distinct` of ``points`` and the weights of the edges left."""
+    keep = _distinct_mask(points)
+    # A repeated vertex ends a zero-length edge: that edge goes with it.
+    return points[keep], weights[keep[1:]]
+

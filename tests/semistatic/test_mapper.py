@@ -72,6 +72,41 @@ def test_merge_converges_on_an_unchanged_box_and_wall():
     assert mapper[box_id].status == "confirmed"
 
 
+def test_each_map_edge_counts_the_observations_along_it():
+    rng = np.random.default_rng(3)
+    mapper = PolylineMap()
+    for k in range(12):
+        pose = jitter(rng)
+        mapper.update(cast_scan(scene(BOX, WALL), pose, noise=0.01, rng=rng, stamp=0.08 * k),
+                      pose)
+    for entry in mapper:
+        assert entry.support.shape == (len(entry.polyline) - 1,)
+        # Every scan saw every face (the first one inserted it): one weight per scan.
+        np.testing.assert_allclose(entry.edge_weights, entry.hits, atol=0.5)
+    assert MapPolyline(0, BOX_TRUTH, hits=7).edge_weights.tolist() == [7.0, 7.0]
+    with pytest.raises(ValueError, match="one weight >= 0 per edge"):
+        MapPolyline(0, BOX_TRUTH, support=[1.0])
+
+
+def test_join_follows_the_edges_seen_not_the_hits():
+    """A stub cut off a long wall keeps the wall's hits; the box it overlaps stays put.
+
+    (warehouse_fleet: a pallet's face merged onto such a stub and was lost.)
+    """
+    mapper = PolylineMap()
+    mapper.restore(MapPolyline(0, BOX_TRUTH, "confirmed", 50, support=[50.0, 50.0]))
+    # 3 cm off the box's front face, seen 4 times, with a wall's 1000 hits.
+    stub = [[2.23, -1.2], [2.23, -0.95]]
+    mapper.restore(MapPolyline(1, stub, "confirmed", 1000, support=[4.0]))
+    assert mapper[1].weight == 4.0  # not its 1000 hits
+    assert mapper[0].weight == 50.0
+    mapper.update(cast_scan(scene(BOX), ORIGIN, stamp=1.0), ORIGIN)
+    assert len(mapper) == 1
+    (line,) = mapper.polylines().values()
+    # Weighted by hits the joined face lay 2.8 cm out, on the stub.
+    assert hausdorff(line, BOX_TRUTH) < 0.01
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_repeated_observations_refine_the_map_outline(seed):
     """Acceptance: 200 observations at 2 cm noise end within 0.5 cm, half the error at 5."""

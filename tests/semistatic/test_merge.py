@@ -12,7 +12,9 @@ from semistatic.hausdorff import hausdorff
 from semistatic.merge import (
     END_TOLERANCE_FACTOR,
     merge,
+    merge_weighted,
     project_onto,
+    transfer_weights,
 )
 from semistatic.polyline import Polyline
 from tests.semistatic.conftest import NASTY_POLYLINES
@@ -228,3 +230,90 @@ def test_a_map_edge_cutting_a_corner_gives_way_to_the_corner_the_scans_see():
                      map_weight=float(hits))
     assert shapely.distance(CORNER, shapely.LineString(line.points)) < 0.01
     assert _farthest_from(BOX_OUTLINE, line) < 0.01
+
+
+# Per-edge weights (issue 10, Build item 4): two faces of a box, the first seen often.
+FACE_SEEN_OFTEN = np.array([[0.0, 0.0], [1.0, 0.0]])
+TWO_FACES = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, -0.6]])
+
+
+def _noisy_view(rng: np.random.Generator, outline: np.ndarray, sigma: float) -> np.ndarray:
+    """Return a Douglas-Peucker polyline of dense noisy readings of ``outline`` (shapely)."""
+    dense = shapely.get_coordinates(shapely.segmentize(shapely.LineString(outline), 0.025))
+    noisy = dense + rng.normal(0.0, sigma, dense.shape)
+    return shapely.get_coordinates(
+        shapely.simplify(shapely.LineString(noisy), EPSILON, preserve_topology=False)
+    )
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_face_seen_late_converges_though_the_other_face_weighs_200_views(seed):
+    rng = np.random.default_rng(seed)
+    line, weights = Polyline(FACE_SEEN_OFTEN + np.array([0.0, 0.003])), np.array([200.0])
+    # The second face's first view is bent 5 cm out (grazing incidence, a few readings).
+    first = [[0.0, 0.0], [1.0, 0.0], [1.05, -0.3], [1.0, -0.6]]
+    one_weight = merge(line, first, EPSILON, map_weight=200.0)
+    (line, weights), = merge_weighted([line], [[first]], EPSILON, map_weights=[weights],
+                                      end_weights=[200.0])
+    truth = shapely.LineString(TWO_FACES)
+    assert shapely.hausdorff_distance(shapely.LineString(line.points), truth) > 0.045
+    for hits in range(201, 221):
+        view = _noisy_view(rng, TWO_FACES, 0.005)
+        one_weight = merge(one_weight, view, EPSILON, map_weight=float(hits))
+        (line, weights), = merge_weighted([line], [[view]], EPSILON, map_weights=[weights],
+                                          end_weights=[float(hits)])
+    # Each edge weighs the views along it: the new face follows its 20 views...
+    assert _farthest_from(truth, line) < 0.008
+    np.testing.assert_allclose(weights, [220.0, 21.0], atol=1.0)
+    # ... the face seen 220 times stays where they put it (3 mm off, noise 5 mm) ...
+    seen_often = shapely.LineString(FACE_SEEN_OFTEN)
+    probes = shapely.points(shapely.get_coordinates(
+        shapely.segmentize(shapely.LineString(line.points[:2]), 0.01)))
+    assert shapely.distance(seen_often, probes).max() < 0.006
+    # ... while one weight for the whole polyline keeps the first view's bend.
+    assert _farthest_from(truth, one_weight) > 0.04
+
+
+def test_a_chord_bridging_a_gap_weighs_nothing_and_gives_way_to_the_corner():
+    # sim1's carton_aisle in lap 1: an observation holds the box's right face and, past a
+    # gap, two readings of its top face; the map extends to them across the gap.
+    right_face = Polyline([[1.0, -0.05], [1.0, -0.6]])
+    parts = [[[0.70, 0.0], [0.74, 0.0]], [[1.0, -0.06], [1.0, -0.6]]]
+    (line, weights), = merge_weighted([right_face], [parts], EPSILON, map_weights=[[50.0]],
+                                      end_weights=[50.0])
+    assert len(line) == 3
+    assert weights[0] < 0.2 * weights[1]  # the bridge: hardly seen
+    outline = shapely.LineString([[0.7, 0.0], [1.0, 0.0], [1.0, -0.6]])
+    assert _farthest_from(outline, line) > 0.03  # the chord cuts the corner
+    one_weight = line
+    rng = np.random.default_rng(2)
+    for hits in range(51, 56):
+        view = np.array([[0.7, 0.0], [1.0, 0.0], [1.0, -0.6]]) + rng.normal(0.0, 0.003, (3, 2))
+        one_weight = merge(one_weight, view, EPSILON, map_weight=float(hits))
+        (line, weights), = merge_weighted([line], [[view]], EPSILON, map_weights=[weights],
+                                          end_weights=[float(hits)])
+    assert _farthest_from(outline, line) < 0.015  # the corner, within noise
+    assert _farthest_from(outline, one_weight) > 0.03  # the chord's weight: the map's
+
+
+def test_transfer_weights_matches_hand_computed_pieces():
+    box = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]
+    # Along face 1, across the corner (9.5 cm off), along face 2, beyond the end, away.
+    piece = [[0.2, 0.01], [0.8, 0.0], [1.01, 0.3], [1.0, 0.7], [1.0, 1.6], [3.0, 1.6]]
+    np.testing.assert_array_equal(
+        transfer_weights(piece, box, [3.0, 5.0], tolerance=0.05), [3.0, 0.0, 5.0, 0.0, 0.0]
+    )
+    with pytest.raises(ValueError, match="one weight per source edge"):
+        transfer_weights(piece, box, [3.0], tolerance=0.05)
+
+
+def test_merge_weighted_checks_its_weights():
+    with pytest.raises(ValueError, match="one value per edge"):
+        merge_weighted([BOX], [[BOX]], EPSILON, map_weights=[[1.0]])
+    with pytest.raises(ValueError, match=">= 0"):
+        merge_weighted([BOX], [[BOX]], EPSILON, map_weights=[[1.0, -1.0]])
+    # Weights given as one number are the old whole-polyline weight: merge's result.
+    seen = BOX + np.array([0.0, 0.02])
+    (line, weights), = merge_weighted([BOX], [[seen]], EPSILON, map_weights=[3.0])
+    np.testing.assert_allclose(line.points, merge(BOX, seen, EPSILON, map_weight=3.0).points)
+    np.testing.assert_allclose(weights, [4.0, 4.0])
