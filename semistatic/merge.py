@@ -444,10 +444,11 @@ def _merged_parts(
             f"{len(lines)} polylines, {len(observations)} observations, "
             f"{len(map_weights)} weights"
         )
+    edge_counts = [max(len(line) - 1, 0) for line in lines]
     edge_weights, point_weights = [], np.ones(len(lines))
-    for k, (line, weight) in enumerate(zip(lines, map_weights, strict=True)):
-        weight = np.asarray(weight, dtype=float)
-        edges = max(len(line) - 1, 0)
+    for k, (edges, weight) in enumerate(zip(edge_counts, map_weights, strict=True)):
+        if not (isinstance(weight, np.ndarray) and weight.dtype == np.float64):
+            weight = np.asarray(weight, dtype=float)
         if weight.ndim == 0:
             point_weights[k] = weight
             weight = np.full(edges, float(weight))
@@ -456,22 +457,26 @@ def _merged_parts(
                 f"{caller}: map weights of polyline {k} need one value per edge ({edges}), "
                 f"got shape {weight.shape}"
             )
-        elif edges:
+        elif edges and end_weights is None:
             point_weights[k] = weight.mean()
-        if end_weights is not None:
-            point_weights[k] = end_weights[k]
-        if not (weight >= 0.0).all() or not point_weights[k] >= 0.0:
-            raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
         edge_weights.append(weight)
+    if end_weights is not None:
+        point_weights = np.asarray(end_weights, dtype=float).reshape(-1)
+    weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
+    weight_offsets = run_offsets(edge_counts, len(edge_counts))
+    # One check for all (NaN fails too); the message names the first offender.
+    if not ((weights >= 0.0).all() and (point_weights >= 0.0).all()):
+        k = next(k for k, weight in enumerate(edge_weights)
+                 if not ((weight >= 0.0).all() and point_weights[k] >= 0.0))
+        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
     parts = [[as_polyline(part) for part in line_parts] for line_parts in observations]
     flat_parts = [part for line_parts in parts for part in line_parts]
     points, offsets = pack_vertices([line.points for line in lines])
-    weights, weight_offsets = _pack_weights(edge_weights)
     part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
     # Each scan edge is one observation of the surface it lies along.
-    part_weights, part_weight_offsets = _pack_weights(
-        [np.ones(max(len(part) - 1, 0)) for part in flat_parts]
-    )
+    part_edge_counts = [max(len(part) - 1, 0) for part in flat_parts]
+    part_weight_offsets = run_offsets(part_edge_counts, len(part_edge_counts))
+    part_weights = np.ones(int(part_weight_offsets[-1]))
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
     first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
     merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
@@ -490,13 +495,6 @@ def _merged_parts(
             zip(lines, views, changed.tolist(), strict=True)
         )
     ]
-
-
-def _pack_weights(weights: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Return per-polyline weight arrays one after the other and their offsets."""
-    offsets = run_offsets((array.size for array in weights), len(weights))
-    packed = np.concatenate(weights) if weights else np.empty(0)
-    return np.ascontiguousarray(packed, dtype=float), offsets
 
 
 @numba.njit(cache=True)
@@ -530,8 +528,7 @@ def _merge_all(
             if not scan.shape[0]:
                 continue  # an empty scan polyline leaves the map polyline itself
             scan_weights = part_weights[part_weight_offsets[part] : part_weight_offsets[part + 1]]
-            old, old_weights = _distinct_weighted(line, line_weights)
-            old, old_totals = _distinct_weighted(line, line_totals)
+            old, old_weights, old_totals = _distinct_with(line, line_weights, line_totals)
             new, new_weights = _distinct_weighted(scan, scan_weights.copy())
             if old.shape[0] == 0:
                 line, line_weights, line_totals = new, np.zeros(new_weights.size), new_weights
@@ -549,8 +546,9 @@ def _merge_all(
                 line_weights = np.zeros(line_totals.size)
             elif new.shape[0] == 1:
                 line = _extend_with_point(old, new[0], tolerance)
-                line_weights = _transfer(line, old, old_weights, tolerance)
-                line_totals = _transfer(line, old, old_totals, tolerance)
+                along = _edges_along(line, old, tolerance)
+                line_weights = _weights_of(along, old_weights)
+                line_totals = _weights_of(along, old_totals)
             else:
                 line, line_weights, line_totals = _merged(
                     old, old_weights, old_totals, new, new_weights, point_weights[k], tolerance,
@@ -755,8 +753,9 @@ def _merged(
         if kept.shape[0] == 0:
             break
         old = kept
-        old_weights = _transfer(old, source, source_weights, tolerance)
-        old_totals = _transfer(old, source, source_totals, tolerance)
+        along = _edges_along(old, source, tolerance)
+        old_weights = _weights_of(along, source_weights)
+        old_totals = _weights_of(along, source_totals)
     scan_arcs, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
     map_arcs = _arc_starts(old)
     scan_starts = _arc_starts(new)
@@ -850,9 +849,10 @@ def _merged(
                          candidates[k, 1] - candidates[k - 1, 1])
         keep[k] = gap > DUPLICATE_DISTANCE
     candidates = candidates[:size][keep]
-    totals = _transfer(candidates, old, old_totals, tolerance)
+    along = _edges_along(candidates, old, tolerance)
+    totals = _weights_of(along, old_totals)
     totals += _transfer(candidates, new, new_weights, tolerance)
-    return candidates, _transfer(candidates, old, old_weights, tolerance), totals
+    return candidates, _weights_of(along, old_weights), totals
 
 
 @numba.njit(cache=True)
@@ -889,8 +889,16 @@ def _transfer(
     ``tolerance`` and inside the source's extent; elsewhere its weight is 0 (nothing of
     ``source`` supports it). ``source`` has distinct vertices, ``weights`` one per edge.
     """
+    return _weights_of(_edges_along(points, source, tolerance), weights)
+
+
+@numba.njit(cache=True)
+def _edges_along(
+    points: np.ndarray, source: np.ndarray, tolerance: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return per edge of ``points`` the ``source`` edge it lies along, or -1 (see _transfer)."""
     edges = max(points.shape[0] - 1, 0)
-    found = np.zeros(edges)
+    found = np.full(edges, -1, np.int64)
     if edges == 0 or source.shape[0] < 2:
         return found
     middles = np.empty((edges, 2))
@@ -901,7 +909,17 @@ def _transfer(
     starts = _arc_starts(source)
     for k in range(edges):
         if distances[k] <= tolerance and not (before[k] or after[k]):
-            found[k] = weights[_edge_at(starts, arcs[k])]
+            found[k] = _edge_at(starts, arcs[k])
+    return found
+
+
+@numba.njit(cache=True)
+def _weights_of(edges: np.ndarray, weights: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Return ``weights[edges]``, 0 where an edge is -1 (none)."""
+    found = np.zeros(edges.size)
+    for k in range(edges.size):
+        if edges[k] >= 0:
+            found[k] = weights[edges[k]]
     return found
 
 
@@ -919,6 +937,15 @@ def _kept_weights(
             length += piece
         found[k] = total / length if length > 0.0 else weights[kept[k]]
     return found
+
+
+@numba.njit(cache=True)
+def _distinct_with(
+    points: np.ndarray, weights: np.ndarray, totals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return :func:`_distinct_weighted` of ``points`` with two weight arrays."""
+    keep = _distinct_mask(points)
+    return points[keep], weights[keep[1:]], totals[keep[1:]]
 
 
 @numba.njit(cache=True)
