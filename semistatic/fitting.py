@@ -53,8 +53,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "is_mixed_pixel",
-           "total_least_squares"]
+__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "fit_polylines_compiled",
+           "is_mixed_pixel", "total_least_squares"]
 
 # Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
 # their intersection is ill-conditioned, so the corner reading's projections are used.
@@ -217,7 +217,7 @@ def fit_polylines(
     >>> kept, lines
     (array([0, 1, 2, 4]), array([0, 0, 1, 1]))
     """
-    return _fit_polylines(
+    return fit_polylines_compiled(
         np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
         line_ids, corners, epsilon,
     )
@@ -319,7 +319,21 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+    """Return :func:`fit_polylines` of readings given as two coordinate arrays.
+
+    For compiled callers: no checks; ``x`` and ``y`` are the readings' contiguous float64
+    coordinates, the other arguments and the result as :func:`fit_polylines`.
+
+    Examples
+    --------
+    >>> x, y = np.array([1.0, 1.0, 1.0]), np.array([-0.1, 0.0, 0.1])
+    >>> vertices, kept, lines = fit_polylines_compiled(x, y, np.zeros(3, np.int64),
+    ...                                                np.array([0, 1, 2]), 0.01)
+    >>> vertices.round(6) + 0.0, kept, lines
+    (array([[ 1. , -0.1],
+           [ 1. ,  0.1]]), array([0, 2]), array([0, 0]))
+    """
     count = corners.size
     # The readings' ranges, once: every fit along the beams weighs each reading by them.
     norms = np.empty(x.size)
