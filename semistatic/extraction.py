@@ -524,7 +524,7 @@ def extract_polylines(
 
 def _extracted_vertices(
     scan: Scan, params: MapperParams
-) -> tuple[np.ndarray, np.ndarray, list[int]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the vertices of :func:`extract_polylines` in one array.
 
     ``(vertices, beams, bounds)``: ``(K, 2)`` vertices (sensor frame) and ``(K,)`` beam
@@ -546,4 +546,4 @@ def _extracted_vertices(
         sines, denominators, params.breakpoint_sigma_r, params.min_points, params.epsilon,
         params.vertex_placement == "fitted",
     )
-    return vertices, beams, bounds.tolist()
+    return vertices, beams, bounds
