@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.fitting import fit_polylines
+from semistatic.fitting import fit_polylines_compiled
 from semistatic.frames import transform_points
 from semistatic.params import MapperParams
 from semistatic.polyline import Polyline
@@ -270,32 +270,40 @@ def _joined_beams(
 
 
 @numba.njit(cache=True)
-def _simplified_intervals(
-    ranges: np.ndarray, index: np.ndarray, cos: np.ndarray, sin: np.ndarray,
+def _extracted(
+    ranges: np.ndarray, limits: np.ndarray, cos: np.ndarray, sin: np.ndarray,
     sines: np.ndarray, denominators: np.ndarray, sigma_r: float, min_points: int,
-    epsilon: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Return the intervals of the usable beams ``index`` and their Douglas-Peucker vertices.
+    epsilon: float, fitted: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Return :func:`_extracted_vertices`'s vertices, beams and bounds in one pass.
 
-    :func:`split_breakpoints` and :func:`douglas_peucker` on flat arrays: ``(P, 2)``
-    sensor-frame readings of every interval of at least ``min_points`` beams one after
-    the other, their beams, their interval numbers (``0, 1, ...``) and the positions of
-    the vertices Douglas-Peucker keeps.
+    :func:`remove_invalid`, :func:`split_breakpoints`, :func:`douglas_peucker` and (when
+    ``fitted``) :func:`~semistatic.fitting.fit_polylines` on flat arrays, one kernel call
+    per scan. A beam is usable when its range is finite and inside ``limits``
+    (``[low, high]``); ``(0, 2)`` vertices and bounds ``[0]`` when nothing is extracted.
     """
     # Scalar loops, not array expressions: each numpy expression in a kernel compiles a
     # broadcasting loop of its own at first use.
-    x, y = np.empty(index.size), np.empty(index.size)
-    for k in range(index.size):
+    low, high = limits[0], limits[1]
+    index = np.empty(ranges.size, np.int64)
+    usable = 0
+    for k in range(ranges.size):
+        if math.isfinite(ranges[k]) and low <= ranges[k] <= high:
+            index[usable] = k
+            usable += 1
+    index = index[:usable]
+    x, y = np.empty(usable), np.empty(usable)
+    for k in range(usable):
         x[k] = ranges[index[k]] * cos[index[k]]
         y[k] = ranges[index[k]] * sin[index[k]]
     joined = _joined_beams(ranges, index, x, y, sines, denominators, sigma_r)
-    points = np.empty((index.size, 2))
-    beams = np.empty(index.size, np.int64)
-    line_ids = np.empty(index.size, np.int64)
-    ends = np.empty(index.size, np.int64)
+    points = np.empty((usable, 2))
+    beams = np.empty(usable, np.int64)
+    line_ids = np.empty(usable, np.int64)
+    ends = np.empty(usable, np.int64)
     lines, start, size = 0, 0, 0
-    for stop in range(1, index.size + 1):
-        if stop < index.size and joined[stop - 1]:
+    for stop in range(1, usable + 1 if usable >= min_points else 0):
+        if stop < usable and joined[stop - 1]:
             continue
         if stop - start >= min_points:
             for k in range(start, stop):
@@ -308,7 +316,39 @@ def _simplified_intervals(
     points = points[:size]
     # Every interval but the last ends where the next begins.
     kept = douglas_peucker_compiled(points, ends[: lines - 1 if lines > 1 else 0], epsilon)
-    return points, beams[:size], line_ids[:size], kept
+    if fitted and size:
+        # The fit reads the readings' coordinates as two contiguous arrays.
+        for k in range(size):
+            x[k], y[k] = points[k, 0], points[k, 1]
+        vertices, kept, vertex_lines = fit_polylines_compiled(
+            x[:size].copy(), y[:size].copy(), line_ids[:size].copy(), kept, epsilon
+        )
+    else:
+        vertices = np.empty((kept.size, 2))
+        vertex_lines = np.empty(kept.size, np.int64)
+        for k in range(kept.size):
+            vertices[k, 0], vertices[k, 1] = points[kept[k], 0], points[kept[k], 1]
+            vertex_lines[k] = line_ids[kept[k]]
+    vertex_beams = np.empty(kept.size, np.int64)
+    # Every line keeps its last point: where the line number changes, a line ends.
+    bounds = np.empty(lines + 1, np.int64)
+    bounds[0] = 0
+    count = 1
+    for k in range(kept.size):
+        vertex_beams[k] = beams[kept[k]]
+        if k and vertex_lines[k] != vertex_lines[k - 1]:
+            bounds[count] = k
+            count += 1
+    if kept.size:
+        bounds[count] = kept.size
+        count += 1
+    return vertices, vertex_beams, bounds[:count]
+
+
+@functools.lru_cache(maxsize=16)
+def _range_limits(range_min: float, range_max: float, max_range: float) -> np.ndarray:
+    """Return the usable ranges ``[range_min, min(range_max, max_range)]`` as an array."""
+    return _frozen(np.array([range_min, min(range_max, max_range)], dtype=float))
 
 
 @functools.lru_cache(maxsize=16)
@@ -484,7 +524,7 @@ def extract_polylines(
 
 def _extracted_vertices(
     scan: Scan, params: MapperParams
-) -> tuple[np.ndarray, np.ndarray, list[int]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the vertices of :func:`extract_polylines` in one array.
 
     ``(vertices, beams, bounds)``: ``(K, 2)`` vertices (sensor frame) and ``(K,)`` beam
@@ -492,26 +532,18 @@ def _extracted_vertices(
     ``bounds[k]:bounds[k + 1]``. Both arrays are fresh, so slices of them can become
     polylines without copies (and the mapper moves all vertices in one transform).
     """
-    index = np.flatnonzero(remove_invalid(scan, params.max_range))
-    # remove_outliers, split_breakpoints and douglas_peucker fused: the same steps on flat
-    # arrays, with the checks of the public functions done once (by MapperParams).
+    ranges = scan.ranges
     if params.outlier_removal:
-        index = index[~_outliers(scan.ranges[index], params.outlier_k, params.outlier_alpha)]
-    nothing = (np.empty((0, 2)), np.empty(0, dtype=np.int64), [0])
-    if index.size < params.min_points:
-        return nothing
-    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+        # remove_outliers on the usable beams; the kernel skips the beams it drops.
+        index = np.flatnonzero(remove_invalid(scan, params.max_range))
+        ranges = ranges.copy()
+        ranges[index[_outliers(ranges[index], params.outlier_k, params.outlier_alpha)]] = np.nan
+        ranges.flags.writeable = False  # as the scan's: one compiled signature
+    cos, sin = beam_directions(ranges.size, scan.angle_min, scan.angle_increment)
     sines, denominators = _breakpoint_sines(scan.angle_increment, params.breakpoint_lambda)
-    points, beams, line_ids, kept = _simplified_intervals(
-        scan.ranges, index, cos, sin, sines, denominators, params.breakpoint_sigma_r,
-        params.min_points, params.epsilon,
+    vertices, beams, bounds = _extracted(
+        ranges, _range_limits(scan.range_min, scan.range_max, params.max_range), cos, sin,
+        sines, denominators, params.breakpoint_sigma_r, params.min_points, params.epsilon,
+        params.vertex_placement == "fitted",
     )
-    if not points.shape[0]:
-        return nothing
-    if params.vertex_placement == "fitted":
-        vertices, kept, vertex_lines = fit_polylines(points, line_ids, kept, params.epsilon)
-    else:
-        vertices, vertex_lines = points[kept], line_ids[kept]
-    # Every line keeps its last point: where the line number changes, a line ends.
-    bounds = (np.flatnonzero(np.diff(vertex_lines)) + 1).tolist()
-    return vertices, beams[kept], [0, *bounds, kept.size]
+    return vertices, beams, bounds

@@ -53,8 +53,8 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "is_mixed_pixel",
-           "total_least_squares"]
+__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "fit_polylines_compiled",
+           "is_mixed_pixel", "total_least_squares"]
 
 # Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
 # their intersection is ill-conditioned, so the corner reading's projections are used.
@@ -100,7 +100,8 @@ def total_least_squares(points: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     if points.shape[0] < 2:
         raise ValueError(f"total_least_squares: needs at least 2 points, got {points.shape[0]}")
     x, y = points[:, 0], points[:, 1]
-    mx, my, dx, dy = _fit(x, y, x, 0, points.shape[0] - 1, 0.0, 0.0)  # plain: no ranges read
+    # plain: no ranges read
+    mx, my, dx, dy = _fit(x, y, x, 0, points.shape[0] - 1, 0.0, 0.0, np.empty(x.size))
     if dx == 0.0 and dy == 0.0:
         raise ValueError("total_least_squares: all points are equal, no line is defined")
     return np.array([mx, my]), np.array([dx, dy])
@@ -134,7 +135,8 @@ def is_mixed_pixel(points: ArrayLike, end: int, corner: int, far: int) -> bool:
         raise ValueError("is_mixed_pixel: end must be next to corner, on the side away from far")
     low, high = min(corner, far), max(corner, far)
     return bool(_mixed_pixel(np.ascontiguousarray(points[:, 0]),
-                             np.ascontiguousarray(points[:, 1]), end, corner, low, high))
+                             np.ascontiguousarray(points[:, 1]), end, corner, low, high,
+                             np.empty(count)))
 
 
 def fit_polyline(
@@ -217,7 +219,7 @@ def fit_polylines(
     >>> kept, lines
     (array([0, 1, 2, 4]), array([0, 0, 1, 1]))
     """
-    return _fit_polylines(
+    return fit_polylines_compiled(
         np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
         line_ids, corners, epsilon,
     )
@@ -238,18 +240,20 @@ def _weight(px, py, norm, bx, by):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _fit(x, y, norms, first, last, bx, by):  # pragma: no cover - compiled
+def _fit(x, y, norms, first, last, bx, by, weights):  # pragma: no cover - compiled
     """Return ``(mx, my, dx, dy)``: centroid and principal direction of readings first..last.
 
     Each reading is weighted by :func:`_weight` (its range in ``norms``) against
     ``(bx, by)``; ``(0, 0)`` gives the plain total least squares fit (every weight exactly
-    1, so bit for bit the unweighted sums; ``norms`` is then not read).
+    1, so bit for bit the unweighted sums; ``norms`` is then not read). ``weights`` is
+    scratch as long as ``x``: the weights of the first pass, read again by the second.
     """
     total = 0.0
     mx = 0.0
     my = 0.0
     for k in range(first, last + 1):
         weight = _weight(x[k], y[k], norms[k], bx, by)
+        weights[k] = weight
         total += weight
         mx += weight * x[k]
         my += weight * y[k]
@@ -259,7 +263,7 @@ def _fit(x, y, norms, first, last, bx, by):  # pragma: no cover - compiled
     sxy = 0.0
     syy = 0.0
     for k in range(first, last + 1):
-        weight = _weight(x[k], y[k], norms[k], bx, by)
+        weight = weights[k]
         u = x[k] - mx
         v = y[k] - my
         sxx += weight * u * u
@@ -272,7 +276,7 @@ def _fit(x, y, norms, first, last, bx, by):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _fit_rays(x, y, norms, first, last):  # pragma: no cover - compiled
+def _fit_rays(x, y, norms, first, last, weights):  # pragma: no cover - compiled
     """Return ``(mx, my, dx, dy)``: the line through readings first..last along their beams.
 
     A reading's range error lies along its beam (``norms`` holds the ranges), so its
@@ -282,10 +286,10 @@ def _fit_rays(x, y, norms, first, last):  # pragma: no cover - compiled
     errors along the beams: the maximum-likelihood line under range noise, and PLE's
     ray-wise metric.
     """
-    mx, my, dx, dy = _fit(x, y, norms, first, last, 0.0, 0.0)
+    mx, my, dx, dy = _fit(x, y, norms, first, last, 0.0, 0.0, weights)
     if dx == 0.0 and dy == 0.0:
         return mx, my, dx, dy
-    cx, cy, ex, ey = _fit(x, y, norms, first, last, dx, dy)
+    cx, cy, ex, ey = _fit(x, y, norms, first, last, dx, dy, weights)
     if ex == 0.0 and ey == 0.0:
         return mx, my, dx, dy
     return cx, cy, ex, ey
@@ -299,8 +303,11 @@ def _project(px, py, mx, my, dx, dy):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
-    """Return whether reading ``end`` next to ``corner`` is a mixed pixel (see above)."""
+def _mixed_pixel(x, y, end, corner, low, high, weights):  # pragma: no cover - compiled
+    """Return whether reading ``end`` next to ``corner`` is a mixed pixel (see above).
+
+    ``weights`` is scratch as long as ``x`` (for :func:`_fit`).
+    """
     px = x[end]
     py = y[end]
     norm = math.hypot(px, py)
@@ -309,7 +316,7 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
     step = math.hypot(ex, ey)
     if norm == 0.0 or step == 0.0 or abs(px * ey - py * ex) / (norm * step) >= MIXED_PIXEL_SINE:
         return False
-    mx, my, dx, dy = _fit(x, y, x, low, high, 0.0, 0.0)  # plain: no ranges read
+    mx, my, dx, dy = _fit(x, y, x, low, high, 0.0, 0.0, weights)  # plain: no ranges read
     sine = (px * dy - py * dx) / norm
     if sine == 0.0:
         return False
@@ -319,7 +326,21 @@ def _mixed_pixel(x, y, end, corner, low, high):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+    """Return :func:`fit_polylines` of readings given as two coordinate arrays.
+
+    For compiled callers: no checks; ``x`` and ``y`` are the readings' contiguous float64
+    coordinates, the other arguments and the result as :func:`fit_polylines`.
+
+    Examples
+    --------
+    >>> x, y = np.array([1.0, 1.0, 1.0]), np.array([-0.1, 0.0, 0.1])
+    >>> vertices, kept, lines = fit_polylines_compiled(x, y, np.zeros(3, np.int64),
+    ...                                                np.array([0, 1, 2]), 0.01)
+    >>> vertices.round(6) + 0.0, kept, lines
+    (array([[ 1. , -0.1],
+           [ 1. ,  0.1]]), array([0, 2]), array([0, 0]))
+    """
     count = corners.size
     # The readings' ranges, once: every fit along the beams weighs each reading by them.
     norms = np.empty(x.size)
@@ -330,6 +351,9 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
     lines = np.empty(count, np.int64)
     merged = np.empty(count, np.int64)
     fits = np.empty((count, 4))
+    # Per edge, the last reading of the span whose line ``fits`` holds (-1: none yet).
+    fitted = np.empty(count, np.int64)
+    weights = np.empty(x.size)
     written = 0
     start = 0
     while start < count:
@@ -337,31 +361,50 @@ def _fit_polylines(x, y, line_ids, corners, epsilon):  # pragma: no cover - comp
         while stop + 1 < count and line_ids[corners[stop + 1]] == line_ids[corners[start]]:
             stop += 1
         # Merge step: drop a corner while one line fits its two edges within epsilon.
+        # The line of the last merge that dropped a corner spans merged[size - 1]..span:
+        # when the next corner stays, it is the edge's own line (no second fit).
         size = 1
         merged[0] = corners[start]
+        span = -1
         for j in range(start + 1, stop):
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1])
-            # The largest perpendicular distance of the readings to that line (inline: a
-            # kernel of its own costs a compilation at first use).
-            worst = 0.0
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1], weights)
+            # Whether a reading lies farther than epsilon from that line (inline: a kernel
+            # of its own costs a compilation at first use); the first one decides.
+            apart = False
             for k in range(merged[size - 1], corners[j + 1] + 1):
-                worst = max(worst, abs((x[k] - mx) * dy - (y[k] - my) * dx))
-            if worst > epsilon:
+                if abs((x[k] - mx) * dy - (y[k] - my) * dx) > epsilon:
+                    apart = True
+                    break
+            if apart:
+                fitted[size - 1] = span if span == corners[j] else -1
                 merged[size] = corners[j]
                 size += 1
+                span = -1
+            else:
+                span = corners[j + 1]
+                fits[size - 1, 0], fits[size - 1, 1] = mx, my
+                fits[size - 1, 2], fits[size - 1, 3] = dx, dy
+        fitted[size - 1] = span if span == corners[stop] else -1
         merged[size] = corners[stop]
         size += 1
         # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
         if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
-                x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2]):
+                x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2],
+                weights):
             size -= 1
         if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
-                x, y, merged[0], merged[1], merged[1], merged[2]):
+                x, y, merged[0], merged[1], merged[1], merged[2], weights):
             for k in range(size - 1):
                 merged[k] = merged[k + 1]
+            for k in range(size - 2):
+                fitted[k] = fitted[k + 1]
+                for value in range(4):
+                    fits[k, value] = fits[k + 1, value]
             size -= 1
         for edge in range(size - 1):
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1])
+            if fitted[edge] == merged[edge + 1]:
+                continue
+            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1], weights)
             fits[edge, 0] = mx
             fits[edge, 1] = my
             fits[edge, 2] = dx

@@ -124,7 +124,7 @@ class Polyline:
 
     @classmethod
     def _split(
-        cls, points: np.ndarray, scan_indices: np.ndarray, bounds: list[int]
+        cls, points: np.ndarray, scan_indices: np.ndarray, bounds: list[int] | np.ndarray
     ) -> PackedPolylines:
         """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid arrays.
 
@@ -134,18 +134,22 @@ class Polyline:
         result keeps the packed vertices and the boxes for the kernels
         (:class:`PackedPolylines`).
         """
-        offsets = np.asarray(bounds, dtype=np.int64)
+        offsets = np.asarray(bounds, dtype=np.int64)  # (an int64 array as it is)
+        bounds = offsets.tolist()
         # (The boxes and the kernels' copy first: kernels are compiled for writeable arrays.)
         boxes = run_boxes(points, offsets)
         packed = PackedPolylines(points.copy(), offsets, boxes)
         points.flags.writeable = False
         scan_indices.flags.writeable = False
+        new = object.__new__
+        lines = []
         for start, stop, box in zip(bounds, bounds[1:], map(tuple, boxes.tolist()), strict=False):
-            line = object.__new__(cls)
+            line = new(cls)
             line.__dict__.update(
                 points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
             )
-            packed.append(line)
+            lines.append(line)
+        packed.extend(lines)
         return packed
 
     @classmethod
