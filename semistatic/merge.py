@@ -465,7 +465,7 @@ def _merged_parts(
     weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
     weight_offsets = run_offsets(edge_counts, len(edge_counts))
     # One check for all (NaN fails too); the message names the first offender.
-    if not ((weights >= 0.0).all() and (point_weights >= 0.0).all()):
+    if not (weights.min(initial=0.0) >= 0.0 and point_weights.min(initial=0.0) >= 0.0):
         k = next(k for k, weight in enumerate(edge_weights)
                  if not ((weight >= 0.0).all() and point_weights[k] >= 0.0))
         raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
@@ -473,15 +473,11 @@ def _merged_parts(
     flat_parts = [part for line_parts in parts for part in line_parts]
     points, offsets = pack_vertices([line.points for line in lines])
     part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
-    # Each scan edge is one observation of the surface it lies along.
-    part_edge_counts = [max(len(part) - 1, 0) for part in flat_parts]
-    part_weight_offsets = run_offsets(part_edge_counts, len(part_edge_counts))
-    part_weights = np.ones(int(part_weight_offsets[-1]))
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
     first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
     merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
-        points, offsets, weights, weight_offsets, part_points, part_offsets, part_weights,
-        part_weight_offsets, first_parts, point_weights, tolerance, epsilon,
+        points, offsets, weights, weight_offsets, part_points, part_offsets, first_parts,
+        point_weights, tolerance, epsilon,
     )
     bounds, weight_bounds = merged_offsets.tolist(), merged_weight_offsets.tolist()
     # Views of the one fresh array, frozen once (scan indices: vertex order).
@@ -500,17 +496,17 @@ def _merged_parts(
 @numba.njit(cache=True)
 def _merge_all(
     points: np.ndarray, offsets: np.ndarray, weights: np.ndarray, weight_offsets: np.ndarray,
-    part_points: np.ndarray, part_offsets: np.ndarray, part_weights: np.ndarray,
-    part_weight_offsets: np.ndarray, first_parts: np.ndarray, point_weights: np.ndarray,
-    tolerance: float, epsilon: float,
+    part_points: np.ndarray, part_offsets: np.ndarray, first_parts: np.ndarray,
+    point_weights: np.ndarray, tolerance: float, epsilon: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """Merge each packed map polyline with its packed parts in turn (:func:`merge`).
 
-    ``weights`` / ``part_weights``: the packed edge weights of the map polylines and of
-    the parts; ``point_weights``: the weight of each map polyline that is one vertex (a
-    part's single vertex weighs 1). Returns the merged vertices one polyline after the
-    other, their offsets, their edge weights, the weights' offsets and which polylines
-    changed (an observation without vertices changes nothing).
+    ``weights``: the packed edge weights of the map polylines (each edge of a part is one
+    observation of the surface it lies along: weight 1); ``point_weights``: the weight of
+    each map polyline that is one vertex (a part's single vertex weighs 1). Returns the
+    merged vertices one polyline after the other, their offsets, their edge weights, the
+    weights' offsets and which polylines changed (an observation without vertices changes
+    nothing).
     """
     count = offsets.size - 1
     merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
@@ -527,9 +523,8 @@ def _merge_all(
             scan = part_points[part_offsets[part] : part_offsets[part + 1]].copy()
             if not scan.shape[0]:
                 continue  # an empty scan polyline leaves the map polyline itself
-            scan_weights = part_weights[part_weight_offsets[part] : part_weight_offsets[part + 1]]
             old, old_weights, old_totals = _distinct_with(line, line_weights, line_totals)
-            new, new_weights = _distinct_weighted(scan, scan_weights.copy())
+            new, new_weights = _distinct_weighted(scan, np.ones(max(scan.shape[0] - 1, 0)))
             if old.shape[0] == 0:
                 line, line_weights, line_totals = new, np.zeros(new_weights.size), new_weights
             elif old.shape[0] == 1 and new.shape[0] == 1:
