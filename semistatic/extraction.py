@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike
 from semistatic.fitting import fit_polylines_compiled
 from semistatic.frames import transform_points
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline
+from semistatic.polyline import PackedPolylines, Polyline
 from semistatic.types import Scan, beam_directions
 
 __all__ = [
@@ -512,11 +512,30 @@ def extract_polylines(
            [1.02 , 3.   ]])
     """
     params = MapperParams() if params is None else params
-    vertices, beams, bounds = _extracted_vertices(scan, params)
     if pose is not None:
         pose = np.asarray(pose, dtype=float).reshape(3)
         if not np.isfinite(pose).all():
             raise ValueError(f"extract_polylines: pose must be a finite (x, y, theta), got {pose}")
+    return extracted_in_frame(scan, params, pose)
+
+
+def extracted_in_frame(
+    scan: Scan, params: MapperParams, pose: np.ndarray | None
+) -> PackedPolylines:
+    """Return :func:`extract_polylines` for a pose already checked (the mapper's hot path).
+
+    ``pose`` is a finite float ``(3,)`` array (or ``None`` for the sensor frame), as the
+    caller validated it once per scan; nothing is checked again here.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=[1.0] * 6, angle_min=-0.03, angle_increment=0.01)
+    >>> extracted_in_frame(scan, MapperParams(), np.array([1.0, 0.0, 0.0]))[0].points.round(3)
+    array([[ 2.  , -0.03],
+           [ 2.  ,  0.02]])
+    """
+    vertices, beams, bounds = _extracted_vertices(scan, params)
+    if pose is not None:
         # A fresh array of finite points: the polylines can be views of it, unchecked.
         vertices = transform_points(pose, vertices)
     return Polyline._split(vertices, beams, bounds)

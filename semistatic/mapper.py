@@ -60,11 +60,19 @@ import shapely
 from numpy.typing import ArrayLike
 
 from semistatic.association import associate_boxed, bounding_boxes
-from semistatic.extraction import extract_polylines
+from semistatic.extraction import extracted_in_frame
 from semistatic.join import merge_group, overlapping_groups
 from semistatic.merge import END_TOLERANCE_FACTOR, merge_weighted, transfer_weights
 from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
-from semistatic.polyline import PackedPolylines, Polyline, as_polyline, pack_vertices, run_boxes
+from semistatic.polyline import (
+    PackedPolylines,
+    Polyline,
+    as_polyline,
+    frozen_polylines,
+    is_packed,
+    pack_vertices,
+    run_boxes,
+)
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
@@ -228,7 +236,9 @@ class UpdateReport:
     stamp
         The scan's stamp (s).
     scan_polylines
-        The extracted scan polylines, in the map frame, in scan order.
+        The extracted scan polylines, in the map frame, in scan order (a tuple; from an
+        update, a :class:`~semistatic.polyline.PackedPolylineTuple` that also keeps their
+        packed vertices and boxes for :meth:`PolylineMap.associate`).
     associated
         Validated pairs with their restricted Hausdorff distance (m), by scan index.
     unassociated
@@ -498,7 +508,7 @@ class PolylineMap:
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
-            tuple(scan_lines),
+            frozen_polylines(scan_lines),
             associated,
             unassociated,
             new_ids=tuple(new_ids),
@@ -553,7 +563,7 @@ class PolylineMap:
             map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
         )
         return UpdateReport(
-            scan.stamp, tuple(scan_lines), associated, unassociated, missed_ids=missed
+            scan.stamp, frozen_polylines(scan_lines), associated, unassociated, missed_ids=missed
         )
 
     def _associated(
@@ -561,12 +571,13 @@ class PolylineMap:
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
         """Return the validated pairs, the unpaired scan indices and the unpaired map ids.
 
-        ``scan_lines`` as extracted (:class:`PackedPolylines`) bring their packed vertices
+        ``scan_lines`` as extracted (:class:`PackedPolylines`, or an update report's
+        :class:`PackedPolylineTuple` of them) bring their packed vertices
         and boxes; any other sequence is packed here.
         """
         geometry = self._geometry()
         ids = geometry.ids
-        packed = isinstance(scan_lines, PackedPolylines)
+        packed = is_packed(scan_lines)
         triples = associate_boxed(
             scan_lines,
             scan_lines.boxes if packed else bounding_boxes(scan_lines),
@@ -794,7 +805,8 @@ def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
 
 def _map_frame_polylines(scan: Scan, params: MapperParams, pose: np.ndarray) -> PackedPolylines:
     """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame."""
-    return extract_polylines(scan, params, pose=pose)
+    # The pose passed _finite_pose already: the extraction does not check it again.
+    return extracted_in_frame(scan, params, pose)
 
 
 class _StageClock:

@@ -288,6 +288,54 @@ class PackedPolylines(list):
         self.boxes = boxes
 
 
+class PackedPolylineTuple(tuple):
+    """A tuple of polylines that keeps the packed vertices and boxes of its source.
+
+    What :class:`semistatic.mapper.UpdateReport` stores as ``scan_polylines``: a plain
+    tuple to read, that still brings a :class:`PackedPolylines`' ``points``, ``offsets``
+    and ``boxes`` to a later association of the same polylines (no repacking).
+
+    Examples
+    --------
+    >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
+    >>> frozen = PackedPolylineTuple.of(lines)
+    >>> isinstance(frozen, tuple), frozen == tuple(lines), frozen.offsets
+    (True, True, array([0, 2]))
+    """
+
+    @classmethod
+    def of(cls, lines: PackedPolylines) -> PackedPolylineTuple:
+        """Return ``lines`` as a tuple that keeps their packed vertices and boxes."""
+        frozen = cls(lines)
+        frozen.points, frozen.offsets, frozen.boxes = lines.points, lines.offsets, lines.boxes
+        return frozen
+
+
+def frozen_polylines(lines: Sequence[Polyline]) -> tuple[Polyline, ...]:
+    """Return ``lines`` as a tuple, keeping packed vertices and boxes when they have them.
+
+    Examples
+    --------
+    >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
+    >>> type(frozen_polylines(lines)).__name__, type(frozen_polylines(list(lines))).__name__
+    ('PackedPolylineTuple', 'tuple')
+    """
+    if is_packed(lines):
+        return PackedPolylineTuple.of(lines)
+    return tuple(lines)
+
+
+def is_packed(lines: Sequence[Polyline]) -> bool:
+    """Return whether ``lines`` bring packed vertices and boxes (``points``, ``offsets``).
+
+    Examples
+    --------
+    >>> is_packed(Polyline._split(np.zeros((1, 2)), np.arange(1), [0, 1])), is_packed([])
+    (True, False)
+    """
+    return isinstance(lines, (PackedPolylines, PackedPolylineTuple))
+
+
 def run_offsets(sizes: Iterable[int], count: int) -> np.ndarray:
     """Return where each of ``count`` consecutive runs of ``sizes`` starts, and the end.
 
