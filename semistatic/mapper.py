@@ -648,6 +648,7 @@ class PolylineMap:
             map_weights=[entry.edge_weights for entry in entries],
             end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
+            trusted=True,  # the map's own polylines and weights, the scan's own parts
         )
         for entry, (line, support) in zip(entries, merged, strict=True):
             self._entries[entry.id] = _replaced(

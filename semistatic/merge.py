@@ -358,6 +358,7 @@ def merge_weighted(
     map_weights: Sequence[float | ArrayLike],
     end_weights: Sequence[float] | None = None,
     end_tolerance: float | None = None,
+    trusted: bool = False,
 ) -> list[tuple[Polyline, np.ndarray]]:
     """Return :func:`merge_observations` with the edge weights of each merged polyline.
 
@@ -377,6 +378,11 @@ def merge_weighted(
     end keeps the reach that many views gave it against a few that stop short of it by
     beam spacing, whatever the weight of its last edge.
 
+    ``trusted=True`` skips the checks of the polylines and weights, for a caller that made
+    them itself (the mapper, once per scan): every polyline and part a
+    :class:`~semistatic.polyline.Polyline`, ``map_weights[k]`` a float64 array of one
+    value >= 0 per edge, ``end_weights`` given, all >= 0. The result is the same.
+
     Examples
     --------
     >>> box = [[0.8, 0.0], [1.0, -0.1], [1.0, -1.0]]  # a chord no view supported, a face
@@ -389,7 +395,16 @@ def merge_weighted(
     array([[ 0.802,  0.   ],
            [ 1.   , -0.1  ],
            [ 1.   , -1.   ]])
+    >>> seen = [[Polyline(corner_seen)]]
+    >>> [weights.tolist() for _, weights in merge_weighted(
+    ...     [Polyline(box)], seen, 0.03, map_weights=[np.array([0.0, 20.0])],
+    ...     end_weights=[20.0], trusted=True)] == [weights.tolist() for _, weights in
+    ...     merge_weighted([box], seen, 0.03, map_weights=[[0.0, 20.0]], end_weights=[20.0])]
+    True
     """
+    if trusted:
+        return _merged_checked(list(map_polylines), observations, epsilon, list(map_weights),
+                               np.array(end_weights, dtype=float), end_tolerance)
     return _merged_parts("merge_weighted", map_polylines, observations, epsilon,
                          map_weights, end_tolerance, end_weights)
 
@@ -470,6 +485,25 @@ def _merged_parts(
                  if not ((weight >= 0.0).all() and point_weights[k] >= 0.0))
         raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
     parts = [[as_polyline(part) for part in line_parts] for line_parts in observations]
+    return _merged_checked(lines, parts, epsilon, edge_weights, point_weights, tolerance,
+                           weights, weight_offsets)
+
+
+def _merged_checked(
+    lines: list[Polyline], parts: Sequence[Sequence[Polyline]], epsilon: float,
+    edge_weights: list[np.ndarray], point_weights: np.ndarray, tolerance: float | None,
+    weights: np.ndarray | None = None, weight_offsets: np.ndarray | None = None,
+) -> list[tuple[Polyline, np.ndarray]]:
+    """Return :func:`_merged_parts` for polylines and per-edge weights already valid.
+
+    ``tolerance`` ``None``: the default end tolerance; ``weights`` and ``weight_offsets``
+    (the packed ``edge_weights``) are packed here when not given.
+    """
+    if tolerance is None:
+        tolerance = END_TOLERANCE_FACTOR * epsilon
+    if weights is None:
+        weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
+        weight_offsets = run_offsets(map(len, edge_weights), len(edge_weights))
     flat_parts = [part for line_parts in parts for part in line_parts]
     points, offsets = pack_vertices([line.points for line in lines])
     part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
