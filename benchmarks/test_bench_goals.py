@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 import scenarios.testbench as testbench_module
-from benchmarks.test_bench_mapper import SCANS, hall
+from benchmarks.test_bench_mapper import SCANS, hall, replayed_ms
 from robots.ekf import EKFLocalizer
 from robots.follower import ChainedFormFollower
 from scenarios.load import load_scenario
@@ -106,24 +106,6 @@ def _mapper_on_hall() -> float:
     return _median_ms(times)
 
 
-def _replayed(records, segments, params) -> float:
-    """Median time of the recorded safety scans through fresh local maps, in order.
-
-    The maps are built as the testbench builds them, one per path segment.
-    """
-    maps = {
-        segment.name: LocalMap(segment.origin, [segment.safety_area], params=params,
-                               segment=segment.name)
-        for segment in segments
-    }
-    times = []
-    for record in records:
-        start = time.perf_counter()
-        maps[record.segment].update(record.scan, record.sensor_pose)
-        times.append(time.perf_counter() - start)
-    return _median_ms(times)
-
-
 def _startup_seconds(cache: str) -> float:
     result = subprocess.run(
         [sys.executable, "-m", "benchmarks.kernel_warmup"],
@@ -146,7 +128,7 @@ def test_speed_goals_table(monkeypatch):
             bench.add_observer(ScanCallback(records.append))
             bench.run()
             segments = bench.segments
-    replayed = _replayed(records, segments, lap.mapper)
+    replayed = replayed_ms(records, segments, lap.mapper)
     rows.append((f"mapper, {len(records)} recorded sim1 scans replayed (median)",
                  f"{replayed:.3f} ms", "", _load()))
     for _, _, label in STAGES:

@@ -101,8 +101,12 @@ def test_mapper_update_time():
     assert math.isfinite(float(np.median(totals)))
 
 
-def _replayed_ms(records, segments, params, between=None) -> float:
-    """Median ms of the recorded scans through fresh local maps; ``between()`` before each."""
+def replayed_ms(records, segments, params, between=None) -> float:
+    """Median ms of the recorded safety scans through fresh local maps, in order.
+
+    The maps are built as the testbench builds them, one per path segment;
+    ``between()``, when given, runs before each update (outside the clock).
+    """
     maps = {
         segment.name: LocalMap(segment.origin, [segment.safety_area], params=params,
                                segment=segment.name)
@@ -127,9 +131,9 @@ def test_mapper_replay_with_cold_caches():
         log = bench.run()
         segments = bench.segments
     closed = 1e3 * float(np.median(log.mapper_seconds))
-    warm = _replayed_ms(records, segments, lap.mapper)
+    warm = replayed_ms(records, segments, lap.mapper)
     after = {
-        megabytes: _replayed_ms(records, segments, lap.mapper,
+        megabytes: replayed_ms(records, segments, lap.mapper,
                                 between=np.ones(megabytes * 131_072).sum)
         for megabytes in (1, 8, 32)
     }
