@@ -133,6 +133,8 @@ class Vehicle:
         self._hooks: dict | None = None
         spec = bench.log_spec
         sim, world = bench.sim, bench.world
+        self._sim = sim  # the bench's for its whole life (a reset builds new vehicles)
+        self._lap_timeout = spec.lap_timeout
         path = build_spline(route.path)
         self.path = path
         # The fleet's segment frames, whatever part of the loop this vehicle drives.
@@ -305,6 +307,11 @@ class Vehicle:
         return self._own_hooks("wants_polylines") or (
             self.index == 0 and self.bench.observer_hooks("wants_polylines"))
 
+    def tick_observers(self) -> None:
+        """Call the vehicle's own observers' ``on_tick`` with it (after each physics step)."""
+        for method in self._own_hooks("on_tick"):
+            method(self)
+
     def emit(self, hook: str, *args) -> None:
         """Call the vehicle's observers' ``hook`` with it, then (first vehicle) the bench's."""
         for method in self._own_hooks(hook):
@@ -346,8 +353,8 @@ class Vehicle:
         """Return whether the current lap reached its end or timed out."""
         if self.done or self.waiting:
             return False
-        elapsed = self.bench.sim_time - self.lap_log.start_time
-        return self.follower.done or elapsed > self.log.spec.lap_timeout
+        elapsed = self._sim.sim_time - self.lap_log.start_time
+        return self.follower.done or elapsed > self._lap_timeout
 
     def landmarks(self, scan: Scan) -> list:
         """Return the reflective-post landmarks of a localization scan."""
