@@ -166,6 +166,9 @@ class Vehicle:
             )
         self.localization_mount = robot.localization_laser
         self.safety_mount = robot.safety_laser
+        # The mount's (x, y, yaw), read at every safety scan: built once, read-only.
+        self._safety_mount_pose = robot.safety_laser.pose2d()
+        self._safety_mount_pose.flags.writeable = False
         posts = world.posts
         # The laser's systematic range error (constant per unit, uniform in +-b) is the
         # filter's fourth state; without it the EKF is overconfident (NEES ~100 on pal1).
@@ -344,8 +347,9 @@ class Vehicle:
             self.lap_log.safety_scans += 1
             self.emit("on_scan", record)
         if control_due:
-            self._record_pose()
-            v, omega = self.follower.command(self.ekf.pose, self._control_dt,
+            pose = self.ekf.pose  # a copy: the log keeps it, the follower only reads it
+            self._record_pose(pose)
+            v, omega = self.follower.command(pose, self._control_dt,
                                              speed_scale=self.speed_scale)
             self.body.command(v, omega)
 
@@ -469,11 +473,11 @@ class Vehicle:
         self.log.raycast_seconds.append(laser.last_raycast_s)
         return scan
 
-    def _record_pose(self) -> None:
+    def _record_pose(self, ekf_pose: np.ndarray) -> None:
         log = self.log
-        log.stamps.append(self.bench.sim.sim_time)
+        log.stamps.append(self._sim.sim_time)
         log.true_poses.append(self.body.true_pose())
-        log.estimated_poses.append(self.ekf.pose)  # the EKF returns copies
+        log.estimated_poses.append(ekf_pose)
         log.covariances.append(self.ekf.covariance)
 
     def _supervise_and_map(self, scan: Scan) -> ScanRecord:
@@ -481,10 +485,11 @@ class Vehicle:
         segment = self.segments[index]
         if self.supervisor.field_set is not segment.fields:
             self.supervisor.set_fields(segment.fields)
-        points = scan_points_in_robot_frame(scan, self.safety_mount.pose2d())
+        points = scan_points_in_robot_frame(scan, self._safety_mount_pose)
         local_map = self._local_maps[segment.name]
-        output = self.supervisor.update(self._occupancy(points, segment, index, local_map),
-                                        scan.stamp)
+        ekf_pose = self.ekf.pose  # a copy; nothing below changes the EKF
+        output = self.supervisor.update(
+            self._occupancy(points, segment, index, local_map, ekf_pose), scan.stamp)
         if output.zone == "protective":
             self.lap_log.stopped_time_s += self._safety_dt
         elif output.zone == "warning":
@@ -495,8 +500,7 @@ class Vehicle:
             self._mapped_segment = segment.name
             self._fetch(segment.name, local_map)
 
-        ekf_pose = self.ekf.pose
-        sensor_world = compose(ekf_pose, self.safety_mount.pose2d())
+        sensor_world = compose(ekf_pose, self._safety_mount_pose)
         scan = self._without_other_vehicles(scan, sensor_world)
         started = time.perf_counter()
         report = local_map.update(scan, sensor_world)
@@ -556,11 +560,11 @@ class Vehicle:
         return dataclasses.replace(scan, ranges=masked)
 
     def _occupancy(self, points: np.ndarray, segment: PathSegment, index: int,
-                   local_map: LocalMap) -> FieldState:
+                   local_map: LocalMap, ekf_pose: np.ndarray) -> FieldState:
         """Ask the policy which readings count; the protective floor is enforced there."""
         minimum = self.minimum_fields[index]
         readings = self.policy.counted_readings(
-            FieldView(points, segment, minimum, self.ekf.pose, local_map, self.log.spec.safety)
+            FieldView(points, segment, minimum, ekf_pose, local_map, self.log.spec.safety)
         )
         return counted_occupancy(points, segment.fields, minimum, readings,
                                  self.supervisor.policy.min_points)
