@@ -280,7 +280,8 @@ class Testbench:
         ...     round((bench.sim_time - start) * 240)
         1
         """
-        self._require_running()
+        if self._sim is None or self.done:
+            self._require_running()  # raises
         if self._people is not None:
             self._walk_people()
         self._sense_and_command()
@@ -375,6 +376,8 @@ class Testbench:
     @property
     def time_step(self) -> float:
         """Return the physics time step (s)."""
+        if self._sim is not None:  # the same quotient (reset); a progress bar asks per tick
+            return self._sim.time_step
         return 1.0 / self.log.spec.rates.physics_hz
 
     @property
