@@ -39,9 +39,37 @@ class Schedule:
     def __init__(self, rate_hz: float, physics_hz: float) -> None:
         self.ratio = rate_hz / physics_hz
 
+    def _count(self, step: int) -> int:
+        """Return how many times the task ran up to physics step ``step``."""
+        return math.floor(step * self.ratio + 1e-9)
+
     def due(self, step: int) -> bool:
         """Return whether the task runs at physics step ``step`` (counted from 1)."""
-        return math.floor(step * self.ratio + 1e-9) > math.floor((step - 1) * self.ratio + 1e-9)
+        return self._count(step) > self._count(step - 1)
+
+    def next_due(self, step: int) -> int:
+        """Return the first step after ``step`` at which the task runs.
+
+        The same decisions as :meth:`due` (the count is monotone in the step), found
+        from the rate in a few evaluations instead of one per physics step: the closed
+        loop asks once per firing, not three times per tick.
+
+        Examples
+        --------
+        >>> schedule = Schedule(50.0, 240.0)
+        >>> schedule.next_due(0), schedule.next_due(5), schedule.next_due(10)
+        (5, 10, 15)
+        >>> [n for n in range(1, 30) if schedule.due(n)]
+        [5, 10, 15, 20, 24, 29]
+        """
+        target = self._count(step) + 1
+        # The real-valued solution of count(m) = target, then exact steps to the first m.
+        candidate = max(step + 1, math.ceil((target - 1e-9) / self.ratio))
+        while candidate > step + 1 and self._count(candidate - 1) >= target:
+            candidate -= 1
+        while self._count(candidate) < target:
+            candidate += 1
+        return candidate
 
 
 @dataclass

@@ -204,9 +204,14 @@ class Testbench:
             self._attach_fleet_observers(spec)
         # A world without people costs no per-tick call (person_positions stays empty).
         self._people = People(self.world) if self.world.people else None
-        self._control = Schedule(rates.control_hz, rates.physics_hz)
-        self._localization = Schedule(rates.localization_hz, rates.physics_hz)
-        self._safety = Schedule(rates.safety_hz, rates.physics_hz)
+        # Control, localization and safety, in the order vehicles take them; each one's
+        # next step is looked up once per firing, and a tick before the earliest does
+        # no sensing or control at all.
+        self._schedules = (Schedule(rates.control_hz, rates.physics_hz),
+                           Schedule(rates.localization_hz, rates.physics_hz),
+                           Schedule(rates.safety_hz, rates.physics_hz))
+        self._due_steps = [schedule.next_due(0) for schedule in self._schedules]
+        self._next_due = min(self._due_steps)
         self._step_count = 0
         self.person_positions: dict[str, np.ndarray | None] = {}
         self.layout_revision = 0
@@ -275,16 +280,16 @@ class Testbench:
         ...     round((bench.sim_time - start) * 240)
         1
         """
-        self._require_running()
-        self._walk_people()
+        if self._sim is None or self.done:
+            self._require_running()  # raises
+        if self._people is not None:
+            self._walk_people()
         self._sense_and_command()
         self._sim.step()
         self._after_physics()
 
     # The tick in named pieces (physics stepping and per-tick glue stay easy to find).
     def _walk_people(self) -> None:
-        if self._people is None:
-            return
         lead = self.fleet[0]
         self.person_positions = self._people.update(self._sim.sim_time,
                                                     lap_start=lead.lap_log.start_time)
@@ -292,7 +297,18 @@ class Testbench:
     def _sense_and_command(self) -> None:
         self._step_count += 1
         n = self._step_count
-        due = (self._control.due(n), self._localization.due(n), self._safety.due(n))
+        if n < self._next_due:
+            # Nothing due: only a vehicle waiting for its start time looks at the clock.
+            for vehicle in self.fleet:
+                if vehicle.waiting:
+                    vehicle.sense_and_command(False, False, False)
+            return
+        steps = self._due_steps
+        due = (steps[0] == n, steps[1] == n, steps[2] == n)
+        for index, schedule in enumerate(self._schedules):
+            if due[index]:
+                steps[index] = schedule.next_due(n)
+        self._next_due = min(steps)
         for vehicle in self.fleet:
             vehicle.sense_and_command(*due)
 
@@ -303,9 +319,7 @@ class Testbench:
         for hook in self.observer_hooks("on_tick"):
             hook(self)
         for vehicle in self.fleet:
-            for observer in vehicle.observers:
-                if hasattr(observer, "on_tick"):
-                    observer.on_tick(vehicle)
+            vehicle.tick_observers()
         for vehicle in self.fleet:
             if vehicle.lap_over():
                 self._end_lap(vehicle)
@@ -362,6 +376,8 @@ class Testbench:
     @property
     def time_step(self) -> float:
         """Return the physics time step (s)."""
+        if self._sim is not None:  # the same quotient (reset); a progress bar asks per tick
+            return self._sim.time_step
         return 1.0 / self.log.spec.rates.physics_hz
 
     @property

@@ -133,6 +133,8 @@ class Vehicle:
         self._hooks: dict | None = None
         spec = bench.log_spec
         sim, world = bench.sim, bench.world
+        self._sim = sim  # the bench's for its whole life (a reset builds new vehicles)
+        self._lap_timeout = spec.lap_timeout
         path = build_spline(route.path)
         self.path = path
         # The fleet's segment frames, whatever part of the loop this vehicle drives.
@@ -164,6 +166,9 @@ class Vehicle:
             )
         self.localization_mount = robot.localization_laser
         self.safety_mount = robot.safety_laser
+        # The mount's (x, y, yaw), read at every safety scan: built once, read-only.
+        self._safety_mount_pose = robot.safety_laser.pose2d()
+        self._safety_mount_pose.flags.writeable = False
         posts = world.posts
         # The laser's systematic range error (constant per unit, uniform in +-b) is the
         # filter's fourth state; without it the EKF is overconfident (NEES ~100 on pal1).
@@ -305,6 +310,11 @@ class Vehicle:
         return self._own_hooks("wants_polylines") or (
             self.index == 0 and self.bench.observer_hooks("wants_polylines"))
 
+    def tick_observers(self) -> None:
+        """Call the vehicle's own observers' ``on_tick`` with it (after each physics step)."""
+        for method in self._own_hooks("on_tick"):
+            method(self)
+
     def emit(self, hook: str, *args) -> None:
         """Call the vehicle's observers' ``hook`` with it, then (first vehicle) the bench's."""
         for method in self._own_hooks(hook):
@@ -337,8 +347,9 @@ class Vehicle:
             self.lap_log.safety_scans += 1
             self.emit("on_scan", record)
         if control_due:
-            self._record_pose()
-            v, omega = self.follower.command(self.ekf.pose, self._control_dt,
+            pose = self.ekf.pose  # a copy: the log keeps it, the follower only reads it
+            self._record_pose(pose)
+            v, omega = self.follower.command(pose, self._control_dt,
                                              speed_scale=self.speed_scale)
             self.body.command(v, omega)
 
@@ -346,8 +357,8 @@ class Vehicle:
         """Return whether the current lap reached its end or timed out."""
         if self.done or self.waiting:
             return False
-        elapsed = self.bench.sim_time - self.lap_log.start_time
-        return self.follower.done or elapsed > self.log.spec.lap_timeout
+        elapsed = self._sim.sim_time - self.lap_log.start_time
+        return self.follower.done or elapsed > self._lap_timeout
 
     def landmarks(self, scan: Scan) -> list:
         """Return the reflective-post landmarks of a localization scan."""
@@ -462,11 +473,11 @@ class Vehicle:
         self.log.raycast_seconds.append(laser.last_raycast_s)
         return scan
 
-    def _record_pose(self) -> None:
+    def _record_pose(self, ekf_pose: np.ndarray) -> None:
         log = self.log
-        log.stamps.append(self.bench.sim.sim_time)
+        log.stamps.append(self._sim.sim_time)
         log.true_poses.append(self.body.true_pose())
-        log.estimated_poses.append(self.ekf.pose)  # the EKF returns copies
+        log.estimated_poses.append(ekf_pose)
         log.covariances.append(self.ekf.covariance)
 
     def _supervise_and_map(self, scan: Scan) -> ScanRecord:
@@ -474,10 +485,11 @@ class Vehicle:
         segment = self.segments[index]
         if self.supervisor.field_set is not segment.fields:
             self.supervisor.set_fields(segment.fields)
-        points = scan_points_in_robot_frame(scan, self.safety_mount.pose2d())
+        points = scan_points_in_robot_frame(scan, self._safety_mount_pose)
         local_map = self._local_maps[segment.name]
-        output = self.supervisor.update(self._occupancy(points, segment, index, local_map),
-                                        scan.stamp)
+        ekf_pose = self.ekf.pose  # a copy; nothing below changes the EKF
+        output = self.supervisor.update(
+            self._occupancy(points, segment, index, local_map, ekf_pose), scan.stamp)
         if output.zone == "protective":
             self.lap_log.stopped_time_s += self._safety_dt
         elif output.zone == "warning":
@@ -488,8 +500,7 @@ class Vehicle:
             self._mapped_segment = segment.name
             self._fetch(segment.name, local_map)
 
-        ekf_pose = self.ekf.pose
-        sensor_world = compose(ekf_pose, self.safety_mount.pose2d())
+        sensor_world = compose(ekf_pose, self._safety_mount_pose)
         scan = self._without_other_vehicles(scan, sensor_world)
         started = time.perf_counter()
         report = local_map.update(scan, sensor_world)
@@ -549,11 +560,11 @@ class Vehicle:
         return dataclasses.replace(scan, ranges=masked)
 
     def _occupancy(self, points: np.ndarray, segment: PathSegment, index: int,
-                   local_map: LocalMap) -> FieldState:
+                   local_map: LocalMap, ekf_pose: np.ndarray) -> FieldState:
         """Ask the policy which readings count; the protective floor is enforced there."""
         minimum = self.minimum_fields[index]
         readings = self.policy.counted_readings(
-            FieldView(points, segment, minimum, self.ekf.pose, local_map, self.log.spec.safety)
+            FieldView(points, segment, minimum, ekf_pose, local_map, self.log.spec.safety)
         )
         return counted_occupancy(points, segment.fields, minimum, readings,
                                  self.supervisor.policy.min_points)

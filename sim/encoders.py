@@ -122,14 +122,15 @@ def arc_increment_jacobian(left: float, right: float, track: float) -> np.ndarra
         distance * (dsinc * sin_h + sinc * cos_h),
         2.0,
     )
-    # Chain rule: d/dl = 1/2 d/dd - 1/(2b) d/da, d/dr = 1/2 d/dd + 1/(2b) d/da.
+    # Chain rule: d/dl = 1/2 d/dd - 1/(2b) d/da, d/dr = 1/2 d/dd + 1/(2b) d/da. Rows
+    # written out (no comprehension): this runs at every odometry reading.
     half_rate = 0.5 / track
-    return np.array(
-        [
-            [0.5 * mean - half_rate * turn, 0.5 * mean + half_rate * turn]
-            for mean, turn in zip(wrt_mean, wrt_half, strict=True)
-        ]
-    )
+    (mean_x, mean_y, mean_theta), (turn_x, turn_y, turn_theta) = wrt_mean, wrt_half
+    return np.array([
+        [0.5 * mean_x - half_rate * turn_x, 0.5 * mean_x + half_rate * turn_x],
+        [0.5 * mean_y - half_rate * turn_y, 0.5 * mean_y + half_rate * turn_y],
+        [0.5 * mean_theta - half_rate * turn_theta, 0.5 * mean_theta + half_rate * turn_theta],
+    ])
 
 
 class WheelEncoders:

@@ -31,6 +31,19 @@ def test_schedule_fires_at_its_rate_without_drift():
         assert fired == round(rate * 10)
 
 
+@pytest.mark.parametrize("physics", [240.0, 100.0, 1000.0])
+@pytest.mark.parametrize("rate", [0.7, 7.0, 12.5, 25.0, 33.3, 50.0, 239.0, 240.0, 500.0])
+def test_schedule_next_due_finds_every_step_due_fires(rate, physics):
+    # The bench jumps from one firing to the next: the steps must be due()'s, one by one.
+    schedule = Schedule(rate, physics)
+    steps = [n for n in range(1, 5001) if schedule.due(n)]
+    jumped = [schedule.next_due(0)]
+    while jumped[-1] <= 5000:
+        jumped.append(schedule.next_due(jumped[-1]))
+    assert jumped[:-1] == steps
+    assert schedule.next_due(2 * 5000 + 1) > 2 * 5000 + 1
+
+
 def test_tiny_run_completes_its_laps_without_collision(tiny_runs):
     spec, log, _ = tiny_runs
     metrics = summarize(log)
