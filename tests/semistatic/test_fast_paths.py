@@ -135,7 +135,7 @@ def test_mapper_without_the_forced_association_path_gives_the_same_map(monkeypat
     ]
     fast_map, fast_reports = _run(scans, poses)
     assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
-    monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+    monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
         assert [(a.scan_index, a.map_id) for a in fast.associated] == [
@@ -209,14 +209,8 @@ def _scene_polylines(rng, count):
 
 
 def test_forced_association_path_equals_the_full_recursion(monkeypatch):
-    original = association_module._forced_path
     forced = []
-
-    def recording(*args):
-        path = original(*args)
-        forced.append(path is not None)
-        return path
-
+    similarity = association_module.similarity
     for seed in range(80):
         rng = np.random.default_rng(seed)
         maps = _scene_polylines(rng, int(rng.integers(1, 8)))
@@ -226,9 +220,13 @@ def test_forced_association_path_equals_the_full_recursion(monkeypatch):
         scans += _scene_polylines(rng, int(rng.integers(0, 3)))
         gate = float(rng.choice([0.12, 0.5, 1.5]))
         viewpoint = (0.0, 0.0, float(rng.uniform(-math.pi, math.pi)))
-        monkeypatch.setattr(association_module, "_forced_path", recording)
+        calls = []
+        monkeypatch.setattr(association_module, "similarity",
+                            lambda *args, calls=calls: calls.append(1) or similarity(*args))
+        monkeypatch.setattr(association_module, "_FORCED_PATHS", True)
         fast = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
-        monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+        forced.append(not calls)
+        monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
         slow = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
         assert fast == slow, seed
     # Both branches were exercised: paths fixed by the gate alone, and paths that needed
@@ -243,9 +241,11 @@ def test_forced_path_needs_one_best_path():
     # similarities, so they must be computed.
     points = np.concatenate((line.points, line.points))
     bounds = np.array([0, 2, 4])
-    assert association_module._forced_path(two_ways, points, bounds, points, bounds) is None
+    forced = association_module._forced_kernel
+    assert not forced(two_ways, points, bounds, points, bounds)[1]
     diagonal = np.eye(2, dtype=bool)
-    path = association_module._forced_path(diagonal, points, bounds, points, bounds)
+    path, fixed = forced(diagonal, points, bounds, points, bounds)
+    assert fixed
     assert path.tolist() == [[0, 0], [1, 1]]
 
 
