@@ -49,6 +49,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -76,9 +77,8 @@ from semistatic.polyline import (
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
+    cuts_and_misses,
     extend_all_ends,
-    free_space_cuts,
-    missed_and_cut,
     missing_polylines,
 )
 
@@ -431,6 +431,7 @@ class PolylineMap:
         clock.lap("extract")
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
         paired_scans = {pair.scan_index for pair in associated}
+        unpaired_set = set(unpaired_ids)
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
@@ -445,14 +446,19 @@ class PolylineMap:
         cut_away = []
         if params.free_space_cut:
             # The join reads the same geometry unless the cut or an insertion changes it.
+            # The unpaired polylines are checked for the life cycle in the same pass: nothing
+            # until then changes them (the merge, the cut and the join exclude them).
             geometry = self._geometry()
             which = [k for k, map_id in enumerate(geometry.ids) if map_id in changed]
+            unpaired_at = [k for k, map_id in enumerate(geometry.ids) if map_id in unpaired_set]
+            unpaired_at_ids = [geometry.ids[k] for k in unpaired_at]
+            cut_pieces, unpaired_checked = cuts_and_misses(
+                [geometry.lines[k] for k in which], [geometry.lines[k] for k in unpaired_at],
+                scan, pose, params, packed=(geometry.points, geometry.offsets, which + unpaired_at),
+            )
             cuts = {
                 geometry.ids[k]: pieces
-                for k, pieces in zip(which, free_space_cuts(
-                    [geometry.lines[k] for k in which], scan, pose, params,
-                    packed=(geometry.points, geometry.offsets, which),
-                ), strict=True)
+                for k, pieces in zip(which, cut_pieces, strict=True)
                 if pieces is not None
             }
             if cuts:
@@ -484,11 +490,11 @@ class PolylineMap:
             map_id for map_id in unpaired_ids
             if map_id not in absorbed and map_id not in joined_survivors
         ]
-        polylines = self._polylines_of(unpaired)
         if params.free_space_cut:
-            checked = missed_and_cut(polylines, scan, pose, params)
+            by_id = dict(zip(unpaired_at_ids, unpaired_checked, strict=True))
+            checked = [by_id[map_id] for map_id in unpaired]
         else:
-            missing = missing_polylines(polylines, scan, pose, params)
+            missing = missing_polylines(self._polylines_of(unpaired), scan, pose, params)
             checked = [(flag, []) for flag in missing]
         present = {}
         for map_id, (missing, pieces) in zip(unpaired, checked, strict=True):
@@ -558,7 +564,8 @@ class PolylineMap:
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
         if not find_missed:
             unpaired_ids = []
-        checked = missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
+        checked = (missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
+                   if unpaired_ids else [])
         missed = tuple(
             map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
         )
@@ -589,10 +596,10 @@ class PolylineMap:
             map_vertices=(geometry.points, geometry.offsets),
             scan_vertices=(scan_lines.points, scan_lines.offsets) if packed else None,
         )
-        associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
-        paired_scans = {pair.scan_index for pair in associated}
+        associated = tuple([Association(i, ids[j], d) for i, j, d in triples])
+        paired_scans = {i for i, _, _ in triples}
         paired_ids = {pair.map_id for pair in associated}
-        unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
+        unassociated = tuple([i for i in range(len(scan_lines)) if i not in paired_scans])
         unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         return associated, unassociated, unpaired_ids
 
@@ -646,7 +653,7 @@ class PolylineMap:
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
             map_weights=[entry.edge_weights for entry in entries],
-            end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
+            end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
             trusted=True,  # the map's own polylines and weights, the scan's own parts
         )
@@ -654,7 +661,7 @@ class PolylineMap:
             self._entries[entry.id] = _replaced(
                 entry,
                 polyline=line,
-                support=support if len(line) > 1 else None,
+                support=support if support.size else None,  # (one weight per edge)
                 status="confirmed",
                 hits=entry.hits + 1,
                 misses=0,
@@ -799,7 +806,8 @@ class _Geometry(NamedTuple):
 
 def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
     pose = np.asarray(pose, dtype=float).reshape(3)
-    if not np.isfinite(pose).all():
+    # (Three Python floats: numpy's per-call cost would exceed the test itself.)
+    if not all(map(math.isfinite, pose.tolist())):
         raise ValueError(f"PolylineMap.{method}: pose must be a finite (x, y, theta), got {pose}")
     return pose
 

@@ -382,6 +382,7 @@ def merge_weighted(
     them itself (the mapper, once per scan): every polyline and part a
     :class:`~semistatic.polyline.Polyline`, ``map_weights[k]`` a float64 array of one
     value >= 0 per edge, ``end_weights`` given, all >= 0. The result is the same.
+    Weights of a merged polyline are read-only views, as its vertices are.
 
     Examples
     --------
@@ -514,12 +515,13 @@ def _merged_checked(
         point_weights, tolerance, epsilon,
     )
     bounds, weight_bounds = merged_offsets.tolist(), merged_weight_offsets.tolist()
-    # Views of the one fresh array, frozen once (scan indices: vertex order).
+    # Views of the fresh arrays, frozen once (scan indices: vertex order).
     views = Polyline._views(merged, bounds, [
         _vertex_order(stop - start) for start, stop in itertools.pairwise(bounds)
     ])
+    merged_weights.flags.writeable = False
     return [
-        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]].copy())
+        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]])
         if is_changed else (line, edge_weights[k])
         for k, (line, view, is_changed) in enumerate(
             zip(lines, views, changed.tolist(), strict=True)
