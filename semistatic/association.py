@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike
 from semistatic.frames import wrap_angle_compiled
 from semistatic.hausdorff import pairwise_restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline, pack_vertices
-from semistatic.similarity import similarity
+from semistatic.similarity import integral_compiled, similarity, tangent_compiled
 
 __all__ = [
     "FAR_COST",
@@ -511,7 +511,7 @@ def associate_boxed(
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects. One kernel call
     # finds them, packs them and orders them.
-    rows, order, flipped, feasible, scan_points, scan_bounds, map_points, map_bounds = (
+    rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds = (
         _candidates(
             scan_boxes, map_boxes, float(gate), scan_points, scan_offsets, map_points,
             map_offsets, np.asarray(viewpoint, dtype=np.float64) if oriented else _NO_POSE,
@@ -524,18 +524,9 @@ def associate_boxed(
     if _FORCED_PATHS:
         pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
     if not forced:
-        # Similarity compares tangent functions, which needs both polylines traversed the
-        # same way round: a map polyline first seen from its other side is reversed.
-        scans = [scans[k] for k in rows.tolist()]
-        ordered = [
-            _reversed(maps[k]) if reverse else maps[k]
-            for k, reverse in zip(order.tolist(), flipped.tolist(), strict=True)
-        ]
-        costs = np.full(feasible.shape, FAR_COST)
-        for a, b in zip(*np.nonzero(feasible), strict=True):
-            value = similarity(scans[a], ordered[b])
-            if value < FAR_COST:
-                costs[a, b] = value
+        # The map polylines are packed in counter-clockwise order and direction, as the
+        # similarity of tangent functions needs them.
+        costs = _similarity_costs(feasible, scan_points, scan_bounds, map_points, map_bounds)
         path = np.array(_optimal_path(costs), dtype=np.int64).reshape(-1, 2)
         pairs = _gateable(path, feasible, scan_bounds, map_bounds)
     # Stops early above the gate: the value is then only a lower bound, but one that
@@ -566,11 +557,11 @@ def _candidates(
 ):  # pragma: no cover - compiled
     """Return the candidates of :func:`associate_boxed`, packed and ordered, in one call.
 
-    ``(rows, order, flipped, feasible, scan_points, scan_bounds, map_points, map_bounds)``:
-    the scan polylines (``rows``) and the map polylines in counter-clockwise order around
-    ``pose`` (``order``; each reversed where ``flipped``, unless not ``oriented``: then in
-    input order, none reversed) that have a partner within ``gate``, which pairs of them
-    can pass it, and their vertices packed.
+    ``(rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds)``: the
+    scan polylines (``rows``) and the map polylines in counter-clockwise order around
+    ``pose`` (``order``; each packed reversed where it runs clockwise, unless not
+    ``oriented``: then in input order, none reversed) that have a partner within ``gate``,
+    which pairs of them can pass it, and their vertices packed.
 
     (The path the gate fixes is another call, :func:`_forced_kernel`: a cached kernel two
     calls above :func:`_dtw_kernel` leaves the one loaded for Python without its
@@ -586,10 +577,7 @@ def _candidates(
     feasible, map_points, map_bounds = _arranged(
         near, rows, columns, ranks, clockwise, map_points, map_bounds
     )
-    return (
-        rows, columns[ranks], clockwise[ranks], feasible, scan_points, scan_bounds, map_points,
-        map_bounds,
-    )
+    return rows, columns[ranks], feasible, scan_points, scan_bounds, map_points, map_bounds
 
 
 @numba.njit(cache=True)
@@ -605,6 +593,38 @@ def _gathered(points, offsets, which):  # pragma: no cover - compiled
             gathered[bounds[k] + v, 0] = points[start + v, 0]
             gathered[bounds[k] + v, 1] = points[start + v, 1]
     return gathered, bounds
+
+
+@numba.njit(cache=True)
+def _similarity_costs(
+    feasible, scan_points, scan_bounds, map_points, map_bounds
+):  # pragma: no cover - compiled
+    """Return the recursion's costs: :func:`similarity` of each feasible pair, else ``FAR_COST``.
+
+    The polylines are packed (:func:`_concatenated`), the map's in the scan's direction;
+    a pair without shape (similarity ``inf``) costs ``FAR_COST`` too.
+    """
+    n, m = feasible.shape
+    costs = np.empty((n, m))
+    for a in range(n):
+        for b in range(m):
+            costs[a, b] = FAR_COST
+    for a in range(n):
+        scan_line = scan_points[scan_bounds[a] : scan_bounds[a + 1]]
+        breaks0, angles0, length0 = tangent_compiled(scan_line)
+        for b in range(m):
+            if not feasible[a, b]:
+                continue
+            map_line = map_points[map_bounds[b] : map_bounds[b + 1]]
+            breaks1, angles1, length1 = tangent_compiled(map_line)
+            if length0 == 0.0 or length1 == 0.0:
+                continue
+            value = integral_compiled(breaks0, angles0, breaks1, angles1) * max(
+                length1 / length0, length0 / length1
+            )
+            if value < FAR_COST:
+                costs[a, b] = value
+    return costs
 
 
 @numba.njit(cache=True)

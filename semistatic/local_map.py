@@ -234,9 +234,9 @@ class LocalMap:
         if xmin > area_xmax or xmax < area_xmin or ymin > area_ymax or ymax < area_ymin:
             return False
         if len(polyline) == 1:
-            geometry = shapely.Point(polyline.points[0])
+            geometry = shapely.points(polyline.points[0])
         else:
-            geometry = shapely.LineString(polyline.points)
+            geometry = shapely.linestrings(polyline.points)
         return bool(shapely.intersects(self.safety_area, geometry))
 
     def update(

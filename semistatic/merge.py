@@ -509,7 +509,7 @@ def _merged_checked(
     points, offsets = pack_vertices([line.points for line in lines])
     part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
-    first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
+    first_parts = run_offsets(map(len, parts), len(parts))
     merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
         points, offsets, weights, weight_offsets, part_points, part_offsets, first_parts,
         point_weights, tolerance, epsilon,

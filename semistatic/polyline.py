@@ -145,9 +145,10 @@ class Polyline:
         lines = []
         for start, stop, box in zip(bounds, bounds[1:], map(tuple, boxes.tolist()), strict=False):
             line = new(cls)
-            line.__dict__.update(
-                points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
-            )
+            # (Item by item: cheaper than an update with keywords, once per scan polyline.)
+            state = line.__dict__
+            state["points"], state["scan_indices"] = points[start:stop], scan_indices[start:stop]
+            state["box"] = box
             lines.append(line)
         packed.extend(lines)
         return packed
@@ -162,10 +163,12 @@ class Polyline:
         (e.g. those of the polyline whose vertices were copied and moved) and no box.
         """
         points.flags.writeable = False
+        new = object.__new__
         lines = []
         for start, stop, indices in zip(bounds, bounds[1:], scan_indices, strict=False):
-            line = object.__new__(cls)
-            line.__dict__.update(points=points[start:stop], scan_indices=indices)
+            line = new(cls)
+            state = line.__dict__  # (as in _split)
+            state["points"], state["scan_indices"] = points[start:stop], indices
             lines.append(line)
         return lines
 

@@ -22,7 +22,8 @@ from semistatic.association import FAR_COST, _optimal_path
 from semistatic.extraction import douglas_peucker
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, _replaced
-from semistatic.polyline import EMPTY_BOX, Polyline
+from semistatic.polyline import EMPTY_BOX, Polyline, pack_vertices
+from semistatic.similarity import similarity
 from semistatic.types import Scan
 from semistatic.visibility import extend_ends
 from tests.semistatic.conftest import NASTY_POLYLINES
@@ -210,7 +211,7 @@ def _scene_polylines(rng, count):
 
 def test_forced_association_path_equals_the_full_recursion(monkeypatch):
     forced = []
-    similarity = association_module.similarity
+    costs = association_module._similarity_costs
     for seed in range(80):
         rng = np.random.default_rng(seed)
         maps = _scene_polylines(rng, int(rng.integers(1, 8)))
@@ -221,8 +222,8 @@ def test_forced_association_path_equals_the_full_recursion(monkeypatch):
         gate = float(rng.choice([0.12, 0.5, 1.5]))
         viewpoint = (0.0, 0.0, float(rng.uniform(-math.pi, math.pi)))
         calls = []
-        monkeypatch.setattr(association_module, "similarity",
-                            lambda *args, calls=calls: calls.append(1) or similarity(*args))
+        monkeypatch.setattr(association_module, "_similarity_costs",
+                            lambda *args, calls=calls: calls.append(1) or costs(*args))
         monkeypatch.setattr(association_module, "_FORCED_PATHS", True)
         fast = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
         forced.append(not calls)
@@ -232,6 +233,24 @@ def test_forced_association_path_equals_the_full_recursion(monkeypatch):
     # Both branches were exercised: paths fixed by the gate alone, and paths that needed
     # the similarities.
     assert 10 <= sum(forced) <= len(forced) - 10
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_similarity_costs_equal_the_similarity_of_each_pair(seed):
+    rng = np.random.default_rng(seed)
+    scans = _scene_polylines(rng, int(rng.integers(1, 5)))
+    maps = _scene_polylines(rng, int(rng.integers(1, 5)))
+    feasible = rng.random((len(scans), len(maps))) < 0.7
+    scan_points, scan_bounds = pack_vertices(scans)
+    map_points, map_bounds = pack_vertices(maps)
+    costs = association_module._similarity_costs(
+        feasible, scan_points, scan_bounds, map_points, map_bounds
+    )
+    for a, scan in enumerate(scans):
+        for b, line in enumerate(maps):
+            value = similarity(scan, line)
+            expected = value if feasible[a, b] and value < FAR_COST else FAR_COST
+            assert costs[a, b] == expected, (a, b)
 
 
 def test_forced_path_needs_one_best_path():
@@ -251,7 +270,8 @@ def test_forced_path_needs_one_best_path():
 
 def test_a_typical_update_computes_no_similarity(monkeypatch):
     calls = []
-    monkeypatch.setattr(association_module, "similarity", lambda *args: calls.append(args) or 0.0)
+    monkeypatch.setattr(association_module, "_similarity_costs",
+                        lambda *args: calls.append(args) or np.zeros(args[0].shape))
     rng = np.random.default_rng(4)
     world = _hall()
     mapper = PolylineMap()
