@@ -317,9 +317,10 @@ class PolylineMap:
         self.join_mode = join_mode
         self._keep = keep
         self._keep_box = keep_box
-        self._entries: dict[int, MapPolyline] = {}
+        self._entries = _Entries()
         self._next_id = 0
         self._geometry_cache: _Geometry | None = None
+        self._geometry_version = -1
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -610,6 +611,10 @@ class PolylineMap:
         (and after an update that changed nothing) the same ones serve again.
         """
         cached = self._geometry_cache
+        version = self._entries.version
+        if cached is not None and version == self._geometry_version:
+            return cached  # no entry replaced since
+        self._geometry_version = version
         ids = list(self._entries)
         lines = [entry.polyline for entry in self._entries.values()]
         # (Polylines compare by identity: the same objects under the same ids.)
@@ -619,18 +624,19 @@ class PolylineMap:
         self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
         return self._geometry_cache
 
-    def _maybe_kept(self, scan_lines: Sequence[Polyline], indices: tuple[int, ...]) -> list[int]:
+    def _maybe_kept(self, scan_lines: PackedPolylines, indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
-        if self._keep_box is None:
+        if self._keep_box is None or not indices:
             return list(indices)
         # Extending an end moves it at most MAX_END_EXTENSION: the box grows by no more.
         xmin, ymin, xmax, ymax = self._keep_box
         reach = MAX_END_EXTENSION
+        boxes = scan_lines.boxes.tolist()
         return [
             index
             for index in indices
             if not (
-                (box := scan_lines[index].box)[0] > xmax + reach
+                (box := boxes[index])[0] > xmax + reach
                 or box[2] < xmin - reach
                 or box[1] > ymax + reach
                 or box[3] < ymin - reach
@@ -790,6 +796,24 @@ class PolylineMap:
                     del self._entries[part.id]
                     joined.append((part.id, survivor.id))
         return joined
+
+
+class _Entries(dict):
+    """The map polylines by id, counting the replacements and deletions.
+
+    So that :meth:`PolylineMap._geometry` knows its cache still holds without comparing
+    every entry (several times per update).
+    """
+
+    version = 0
+
+    def __setitem__(self, map_id: int, entry: MapPolyline) -> None:
+        self.version += 1
+        super().__setitem__(map_id, entry)
+
+    def __delitem__(self, map_id: int) -> None:
+        self.version += 1
+        super().__delitem__(map_id)
 
 
 class _Geometry(NamedTuple):

@@ -130,9 +130,8 @@ class Polyline:
 
         The arrays are frozen once and each polyline holds views of them (hot paths only,
         as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
-        all non-empty runs are found in one pass and cached as their :attr:`box`; the
-        result keeps the packed vertices and the boxes for the kernels
-        (:class:`PackedPolylines`).
+        all runs are found in one pass; the result keeps the packed vertices and the boxes
+        for the kernels (:class:`PackedPolylines`).
         """
         offsets = np.asarray(bounds, dtype=np.int64)  # (an int64 array as it is)
         bounds = offsets.tolist()
@@ -143,12 +142,11 @@ class Polyline:
         scan_indices.flags.writeable = False
         new = object.__new__
         lines = []
-        for start, stop, box in zip(bounds, bounds[1:], map(tuple, boxes.tolist()), strict=False):
+        for start, stop in itertools.pairwise(bounds):
             line = new(cls)
             # (Item by item: cheaper than an update with keywords, once per scan polyline.)
             state = line.__dict__
             state["points"], state["scan_indices"] = points[start:stop], scan_indices[start:stop]
-            state["box"] = box
             lines.append(line)
         packed.extend(lines)
         return packed
