@@ -532,7 +532,8 @@ def associate_boxed(
     # Stops early above the gate: the value is then only a lower bound, but one that
     # fails the gate exactly when the full distance does.
     distances = pairwise_restricted_hausdorff(
-        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=gate
+        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=float(gate),
+        trusted=True,  # the kernels' own arrays
     ).tolist()
     scan_index, map_index = rows[pairs[:, 0]].tolist(), order[pairs[:, 1]].tolist()
     return [

@@ -144,17 +144,20 @@ class MapPolyline:
 
     @property
     def edge_weights(self) -> np.ndarray:
-        """Return :attr:`support`, or ``hits`` per edge where it is unknown or stale.
+        """Return :attr:`support`, or ``hits`` per edge where it is unknown.
+
+        (A support always fits its polyline: checked on construction, and dropped by the
+        map's own updates whenever they replace the polyline without one.)
 
         Examples
         --------
         >>> MapPolyline(0, Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), hits=4).edge_weights
         array([4., 4.])
         """
-        edges = max(len(self.polyline) - 1, 0)
-        if self.support is not None and self.support.shape == (edges,):
-            return self.support
-        return np.full(edges, float(min(self.hits, MAX_MERGE_WEIGHT)))
+        support = self.support
+        if support is not None:
+            return support
+        return np.full(max(len(self.polyline) - 1, 0), float(min(self.hits, MAX_MERGE_WEIGHT)))
 
     @property
     def weight(self) -> float:
