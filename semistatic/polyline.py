@@ -320,7 +320,11 @@ def frozen_polylines(lines: Sequence[Polyline]) -> tuple[Polyline, ...]:
     >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
     >>> type(frozen_polylines(lines)).__name__, type(frozen_polylines(list(lines))).__name__
     ('PackedPolylineTuple', 'tuple')
+    >>> (frozen := frozen_polylines(lines)) is frozen_polylines(frozen)
+    True
     """
+    if isinstance(lines, PackedPolylineTuple):
+        return lines  # frozen already (e.g. another map's report of the same scan)
     if is_packed(lines):
         return PackedPolylineTuple.of(lines)
     return tuple(lines)
