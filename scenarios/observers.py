@@ -47,7 +47,7 @@ from scenarios.metrics import (
 )
 from scenarios.records import LapLog, ScanRecord
 from scenarios.spec import ScenarioSpec
-from semistatic.frames import inverse, transform_points
+from semistatic.frames import transform_points
 from sim.debug_view import DebugView
 from sim.ground_truth import box_outlines
 
@@ -162,8 +162,8 @@ def _mapped(local_maps, outline: np.ndarray) -> bool:
     lines = []
     for local_map in local_maps:
         # The grown box in the segment frame, boxed again: a superset of the candidates.
-        local = transform_points(inverse(local_map.origin), corners)
-        (lx, ly), (hx, hy) = local.min(axis=0), local.max(axis=0)
+        xs, ys = transform_points(local_map.world_in_local, corners).T.tolist()
+        lx, ly, hx, hy = min(xs), min(ys), max(xs), max(ys)
         for line in local_map.polylines().values():
             bx0, by0, bx1, by1 = line.box
             if bx0 >= lx and by0 >= ly and bx1 <= hx and by1 <= hy:

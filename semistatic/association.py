@@ -28,11 +28,11 @@ more than the part in view).
 
 Since one ``FAR_COST`` outweighs the similarities of any path, the gate alone often fixes
 the optimal path (each polyline near only its own counterpart): then no similarity is
-computed at all (:func:`_forced_path` proves it with a bound on the similarities), and
+computed at all (:func:`_forced_kernel` proves it with a bound on the similarities), and
 the validation stops each restricted Hausdorff distance as soon as it exceeds the gate.
 
-The broad phase (box gaps), the counter-clockwise order, the recursion and the validation
-of all pairs each run in one compiled kernel (numba) per update.
+The broad phase (box gaps), the counter-clockwise order and the path the gate fixes run
+in one compiled kernel (numba) per update, the validation of all pairs in another.
 
 Examples
 --------
@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike
 from semistatic.frames import wrap_angle_compiled
 from semistatic.hausdorff import pairwise_restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline, pack_vertices
-from semistatic.similarity import similarity
+from semistatic.similarity import integral_compiled, similarity, tangent_compiled
 
 __all__ = [
     "FAR_COST",
@@ -374,7 +374,23 @@ def _lengths(points, bounds):  # pragma: no cover - compiled
 
 @numba.njit(cache=True)
 def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds):  # pragma: no cover
-    """Return the path of :func:`_forced_path` and whether the gate alone fixes it."""
+    """Return whether the similarities cannot change the path, and then its gateable pairs.
+
+    ``(pairs, forced)``: when ``forced``, ``pairs`` are the pairs of the optimal path
+    that can pass the gate (:func:`_gateable`); else ``pairs`` mean nothing.
+
+    ``feasible`` marks the pairs that can pass the gate; the polylines are given as
+    packed vertices with bounds (:func:`_concatenated`). A pair that cannot pass the
+    gate or has no shape (zero length) costs ``FAR_COST``; any other costs its similarity,
+    the integral of eq. (1) times the length ratio. That integral is a variance, at most a
+    quarter of the squared range of ``T1 - T0``, which is at most ``pi`` per turn of either
+    polyline: less than ``((N0 + N1) pi)^2 / 4`` for ``N0`` and ``N1`` vertices (eight
+    times that is used, far clear of any rounding). When a single path has the fewest
+    ``FAR_COST`` pairs, every other path costs at least one ``FAR_COST`` more; if the
+    bounds along that path add up to less than ``FAR_COST``, it is the optimal path of
+    eq. (5) whatever the similarities are, and none needs to be computed (for a map in
+    view, usually all of them).
+    """
     scan_lengths = _lengths(scan_points, scan_bounds)
     map_lengths = _lengths(map_points, map_bounds)
     n, m = feasible.shape
@@ -421,38 +437,7 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
             ratio = max(scan_lengths[a] / map_lengths[b], map_lengths[b] / scan_lengths[a])
             vertices = (scan_bounds[a + 1] - scan_bounds[a]) + (map_bounds[b + 1] - map_bounds[b])
             bound += 2.0 * (vertices * math.pi) ** 2 * ratio
-    return path, bound < FAR_COST
-
-
-def _forced_path(
-    feasible: np.ndarray,
-    scan_points: np.ndarray,
-    scan_bounds: np.ndarray,
-    map_points: np.ndarray,
-    map_bounds: np.ndarray,
-) -> np.ndarray | None:
-    """Return the ``(P, 2)`` path when the similarities cannot change it, else ``None``.
-
-    ``feasible`` marks the pairs that can pass the gate; the polylines are given as
-    concatenated vertices with bounds (:func:`_concatenated`). A pair that cannot pass the
-    gate or has no shape (zero length) costs ``FAR_COST``; any other costs its similarity,
-    the integral of eq. (1) times the length ratio. That integral is a variance, at most a
-    quarter of the squared range of ``T1 - T0``, which is at most ``pi`` per turn of either
-    polyline: less than ``((N0 + N1) pi)^2 / 4`` for ``N0`` and ``N1`` vertices (eight
-    times that is used, far clear of any rounding). When a single path has the fewest
-    ``FAR_COST`` pairs, every other path costs at least one ``FAR_COST`` more; if the
-    bounds along that path add up to less than ``FAR_COST``, it is the optimal path of
-    eq. (5) whatever the similarities are, and none needs to be computed (for a map in
-    view, usually all of them).
-    """
-    path, forced = _forced_kernel(
-        np.ascontiguousarray(feasible, dtype=np.bool_),
-        np.ascontiguousarray(scan_points, dtype=np.float64),
-        scan_bounds,
-        np.ascontiguousarray(map_points, dtype=np.float64),
-        map_bounds,
-    )
-    return path if forced else None
+    return _gateable(path, feasible, scan_bounds, map_bounds), bound < FAR_COST
 
 
 def associate_with_distances(
@@ -520,49 +505,35 @@ def associate_boxed(
     scans, maps = scan_polylines, map_polylines
     if not scans or not maps:
         return []
-    pose = None if viewpoint is None else np.asarray(viewpoint, dtype=np.float64)
+    scan_points, scan_offsets = _concatenated(scans) if scan_vertices is None else scan_vertices
+    map_points, map_offsets = _concatenated(maps) if map_vertices is None else map_vertices
+    oriented = viewpoint is not None
     # Only polylines with at least one partner near enough to pass the gate take part:
-    # the others could only fill the path with pairs the gate rejects.
-    near, rows, columns = _broad_phase(scan_boxes, map_boxes, float(gate))
+    # the others could only fill the path with pairs the gate rejects. One kernel call
+    # finds them, packs them and orders them.
+    rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds = (
+        _candidates(
+            scan_boxes, map_boxes, float(gate), scan_points, scan_offsets, map_points,
+            map_offsets, np.asarray(viewpoint, dtype=np.float64) if oriented else _NO_POSE,
+            oriented,
+        )
+    )
     if rows.size == 0:
         return []
-    scans = [scans[k] for k in rows.tolist()]
-    candidates = [maps[k] for k in columns.tolist()]
-    if scan_vertices is not None and len(scans) == len(scan_polylines):
-        scan_points, scan_bounds = scan_vertices  # every scan polyline is a candidate
-    else:
-        scan_points, scan_bounds = _concatenated(scans)
-    if map_vertices is not None and len(candidates) == len(maps):
-        map_points, map_bounds = map_vertices  # every map polyline is a candidate
-    else:
-        map_points, map_bounds = _concatenated(candidates)
-    if pose is None:
-        ranks = np.arange(columns.size)
-        clockwise = np.zeros(columns.size, dtype=np.bool_)
-    else:
-        ranks, clockwise = _ccw_kernel(map_points, map_bounds, pose)
-    # Similarity compares tangent functions, which needs both polylines traversed the
-    # same way round: a map polyline first seen from its other side is reversed.
-    feasible, map_points, map_bounds = _arranged(
-        near, rows, columns, ranks, clockwise, map_points, map_bounds
-    )
-    order = columns[ranks]
-    path = _forced_path(feasible, scan_points, scan_bounds, map_points, map_bounds)
-    if path is None:
-        ordered = [
-            _reversed(candidates[k]) if clockwise[k] else candidates[k] for k in ranks.tolist()
-        ]
-        costs = np.full(feasible.shape, FAR_COST)
-        for a, b in zip(*np.nonzero(feasible), strict=True):
-            value = similarity(scans[a], ordered[b])
-            if value < FAR_COST:
-                costs[a, b] = value
+    forced = False
+    if _FORCED_PATHS:
+        pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
+    if not forced:
+        # The map polylines are packed in counter-clockwise order and direction, as the
+        # similarity of tangent functions needs them.
+        costs = _similarity_costs(feasible, scan_points, scan_bounds, map_points, map_bounds)
         path = np.array(_optimal_path(costs), dtype=np.int64).reshape(-1, 2)
+        pairs = _gateable(path, feasible, scan_bounds, map_bounds)
     # Stops early above the gate: the value is then only a lower bound, but one that
     # fails the gate exactly when the full distance does.
-    pairs = _gateable(path, feasible, scan_bounds, map_bounds)
     distances = pairwise_restricted_hausdorff(
-        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=gate
+        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=float(gate),
+        trusted=True,  # the kernels' own arrays
     ).tolist()
     scan_index, map_index = rows[pairs[:, 0]].tolist(), order[pairs[:, 1]].tolist()
     return [
@@ -570,6 +541,91 @@ def associate_boxed(
         for i, j, distance in zip(scan_index, map_index, distances, strict=True)
         if distance <= gate
     ]
+
+
+# The viewpoint passed to the kernel when there is none (then unused).
+_NO_POSE = np.zeros(3)
+
+# Whether the association may take the path the gate alone fixes (False only in tests that
+# compare it with the full recursion).
+_FORCED_PATHS = True
+
+
+@numba.njit(cache=True)
+def _candidates(
+    scan_boxes, map_boxes, gate, scan_points, scan_offsets, map_points, map_offsets, pose,
+    oriented,
+):  # pragma: no cover - compiled
+    """Return the candidates of :func:`associate_boxed`, packed and ordered, in one call.
+
+    ``(rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds)``: the
+    scan polylines (``rows``) and the map polylines in counter-clockwise order around
+    ``pose`` (``order``; each packed reversed where it runs clockwise, unless not
+    ``oriented``: then in input order, none reversed) that have a partner within ``gate``,
+    which pairs of them can pass it, and their vertices packed.
+
+    (The path the gate fixes is another call, :func:`_forced_kernel`: a cached kernel two
+    calls above :func:`_dtw_kernel` leaves the one loaded for Python without its
+    environment, and the recursion's fallback calls it from Python.)
+    """
+    near, rows, columns = _broad_phase(scan_boxes, map_boxes, gate)
+    scan_points, scan_bounds = _gathered(scan_points, scan_offsets, rows)
+    map_points, map_bounds = _gathered(map_points, map_offsets, columns)
+    if oriented:
+        ranks, clockwise = _ccw_kernel(map_points, map_bounds, pose)
+    else:
+        ranks, clockwise = np.arange(columns.size), np.zeros(columns.size, np.bool_)
+    feasible, map_points, map_bounds = _arranged(
+        near, rows, columns, ranks, clockwise, map_points, map_bounds
+    )
+    return rows, columns[ranks], feasible, scan_points, scan_bounds, map_points, map_bounds
+
+
+@numba.njit(cache=True)
+def _gathered(points, offsets, which):  # pragma: no cover - compiled
+    """Return the packed runs ``which`` of packed ``points`` and their bounds."""
+    bounds = np.zeros(which.size + 1, np.int64)
+    for k in range(which.size):
+        bounds[k + 1] = bounds[k] + offsets[which[k] + 1] - offsets[which[k]]
+    gathered = np.empty((bounds[which.size], 2))
+    for k in range(which.size):
+        start = offsets[which[k]]
+        for v in range(bounds[k + 1] - bounds[k]):
+            gathered[bounds[k] + v, 0] = points[start + v, 0]
+            gathered[bounds[k] + v, 1] = points[start + v, 1]
+    return gathered, bounds
+
+
+@numba.njit(cache=True)
+def _similarity_costs(
+    feasible, scan_points, scan_bounds, map_points, map_bounds
+):  # pragma: no cover - compiled
+    """Return the recursion's costs: :func:`similarity` of each feasible pair, else ``FAR_COST``.
+
+    The polylines are packed (:func:`_concatenated`), the map's in the scan's direction;
+    a pair without shape (similarity ``inf``) costs ``FAR_COST`` too.
+    """
+    n, m = feasible.shape
+    costs = np.empty((n, m))
+    for a in range(n):
+        for b in range(m):
+            costs[a, b] = FAR_COST
+    for a in range(n):
+        scan_line = scan_points[scan_bounds[a] : scan_bounds[a + 1]]
+        breaks0, angles0, length0 = tangent_compiled(scan_line)
+        for b in range(m):
+            if not feasible[a, b]:
+                continue
+            map_line = map_points[map_bounds[b] : map_bounds[b + 1]]
+            breaks1, angles1, length1 = tangent_compiled(map_line)
+            if length0 == 0.0 or length1 == 0.0:
+                continue
+            value = integral_compiled(breaks0, angles0, breaks1, angles1) * max(
+                length1 / length0, length0 / length1
+            )
+            if value < FAR_COST:
+                costs[a, b] = value
+    return costs
 
 
 @numba.njit(cache=True)

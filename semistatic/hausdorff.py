@@ -180,6 +180,7 @@ def pairwise_restricted_hausdorff(
     mode: str = "vertex",
     *,
     limit: float = math.inf,
+    trusted: bool = False,
 ) -> np.ndarray:
     """Return :func:`restricted_hausdorff` of many polyline pairs in one call.
 
@@ -196,6 +197,10 @@ def pairwise_restricted_hausdorff(
         ``(P, 2)`` int64 ``(polyline of side 0, polyline of side 1)`` pairs.
     mode, limit
         As in :func:`restricted_hausdorff` (``limit`` applies to every pair).
+    trusted
+        The arrays already are what the kernel takes (C-contiguous writeable float64
+        vertices, int64 bounds and ``(P, 2)`` pairs, a float ``limit``), as a compiled
+        caller's are: nothing is converted (the association's per-scan path).
 
     Returns
     -------
@@ -212,6 +217,8 @@ def pairwise_restricted_hausdorff(
     array([0.05, 0.95])
     """
     code = _mode_code(mode)
+    if trusted:
+        return _pairwise_kernel(points0, bounds0, points1, bounds1, pairs, code, limit)
     return _pairwise_kernel(
         _writeable_points(points0),
         np.asarray(bounds0, dtype=np.int64),

@@ -133,6 +133,7 @@ class LocalMap:
         # to_local is between(origin, pose), i.e. compose(inverse(origin), pose): the
         # inverse of the fixed origin is computed once.
         self._world_in_local = inverse(origin)
+        self._world_in_local.flags.writeable = False
         self.segment = segment
         self.safety_area = _area_union(safety_areas)
         self._area_box = (
@@ -213,6 +214,17 @@ class LocalMap:
         """Delete polyline ``map_id`` from the map."""
         self._map.remove(map_id)
 
+    @property
+    def world_in_local(self) -> np.ndarray:
+        """Return the world frame's pose in the segment frame (``inverse(origin)``, read-only).
+
+        Examples
+        --------
+        >>> LocalMap(origin=(1.0, 0.0, 0.0)).world_in_local
+        array([-1.,  0.,  0.])
+        """
+        return self._world_in_local
+
     def to_local(self, pose: ArrayLike) -> np.ndarray:
         """Return a world pose expressed in the segment frame.
 
@@ -234,9 +246,9 @@ class LocalMap:
         if xmin > area_xmax or xmax < area_xmin or ymin > area_ymax or ymax < area_ymin:
             return False
         if len(polyline) == 1:
-            geometry = shapely.Point(polyline.points[0])
+            geometry = shapely.points(polyline.points[0])
         else:
-            geometry = shapely.LineString(polyline.points)
+            geometry = shapely.linestrings(polyline.points)
         return bool(shapely.intersects(self.safety_area, geometry))
 
     def update(

@@ -49,6 +49,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -76,9 +77,8 @@ from semistatic.polyline import (
 from semistatic.types import Scan
 from semistatic.visibility import (
     MAX_END_EXTENSION,
+    cuts_and_misses,
     extend_all_ends,
-    free_space_cuts,
-    missed_and_cut,
     missing_polylines,
 )
 
@@ -144,17 +144,20 @@ class MapPolyline:
 
     @property
     def edge_weights(self) -> np.ndarray:
-        """Return :attr:`support`, or ``hits`` per edge where it is unknown or stale.
+        """Return :attr:`support`, or ``hits`` per edge where it is unknown.
+
+        (A support always fits its polyline: checked on construction, and dropped by the
+        map's own updates whenever they replace the polyline without one.)
 
         Examples
         --------
         >>> MapPolyline(0, Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), hits=4).edge_weights
         array([4., 4.])
         """
-        edges = max(len(self.polyline) - 1, 0)
-        if self.support is not None and self.support.shape == (edges,):
-            return self.support
-        return np.full(edges, float(min(self.hits, MAX_MERGE_WEIGHT)))
+        support = self.support
+        if support is not None:
+            return support
+        return np.full(max(len(self.polyline) - 1, 0), float(min(self.hits, MAX_MERGE_WEIGHT)))
 
     @property
     def weight(self) -> float:
@@ -317,9 +320,10 @@ class PolylineMap:
         self.join_mode = join_mode
         self._keep = keep
         self._keep_box = keep_box
-        self._entries: dict[int, MapPolyline] = {}
+        self._entries = _Entries()
         self._next_id = 0
         self._geometry_cache: _Geometry | None = None
+        self._geometry_version = -1
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -431,6 +435,7 @@ class PolylineMap:
         clock.lap("extract")
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
         paired_scans = {pair.scan_index for pair in associated}
+        unpaired_set = set(unpaired_ids)
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
@@ -445,14 +450,19 @@ class PolylineMap:
         cut_away = []
         if params.free_space_cut:
             # The join reads the same geometry unless the cut or an insertion changes it.
+            # The unpaired polylines are checked for the life cycle in the same pass: nothing
+            # until then changes them (the merge, the cut and the join exclude them).
             geometry = self._geometry()
             which = [k for k, map_id in enumerate(geometry.ids) if map_id in changed]
+            unpaired_at = [k for k, map_id in enumerate(geometry.ids) if map_id in unpaired_set]
+            unpaired_at_ids = [geometry.ids[k] for k in unpaired_at]
+            cut_pieces, unpaired_checked = cuts_and_misses(
+                [geometry.lines[k] for k in which], [geometry.lines[k] for k in unpaired_at],
+                scan, pose, params, packed=(geometry.points, geometry.offsets, which + unpaired_at),
+            )
             cuts = {
                 geometry.ids[k]: pieces
-                for k, pieces in zip(which, free_space_cuts(
-                    [geometry.lines[k] for k in which], scan, pose, params,
-                    packed=(geometry.points, geometry.offsets, which),
-                ), strict=True)
+                for k, pieces in zip(which, cut_pieces, strict=True)
                 if pieces is not None
             }
             if cuts:
@@ -484,11 +494,11 @@ class PolylineMap:
             map_id for map_id in unpaired_ids
             if map_id not in absorbed and map_id not in joined_survivors
         ]
-        polylines = self._polylines_of(unpaired)
         if params.free_space_cut:
-            checked = missed_and_cut(polylines, scan, pose, params)
+            by_id = dict(zip(unpaired_at_ids, unpaired_checked, strict=True))
+            checked = [by_id[map_id] for map_id in unpaired]
         else:
-            missing = missing_polylines(polylines, scan, pose, params)
+            missing = missing_polylines(self._polylines_of(unpaired), scan, pose, params)
             checked = [(flag, []) for flag in missing]
         present = {}
         for map_id, (missing, pieces) in zip(unpaired, checked, strict=True):
@@ -558,7 +568,8 @@ class PolylineMap:
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
         if not find_missed:
             unpaired_ids = []
-        checked = missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
+        checked = (missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
+                   if unpaired_ids else [])
         missed = tuple(
             map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
         )
@@ -589,10 +600,10 @@ class PolylineMap:
             map_vertices=(geometry.points, geometry.offsets),
             scan_vertices=(scan_lines.points, scan_lines.offsets) if packed else None,
         )
-        associated = tuple(Association(i, ids[j], d) for i, j, d in triples)
-        paired_scans = {pair.scan_index for pair in associated}
+        associated = _associations(triples, ids)
+        paired_scans = {i for i, _, _ in triples}
         paired_ids = {pair.map_id for pair in associated}
-        unassociated = tuple(i for i in range(len(scan_lines)) if i not in paired_scans)
+        unassociated = tuple([i for i in range(len(scan_lines)) if i not in paired_scans])
         unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         return associated, unassociated, unpaired_ids
 
@@ -603,6 +614,10 @@ class PolylineMap:
         (and after an update that changed nothing) the same ones serve again.
         """
         cached = self._geometry_cache
+        version = self._entries.version
+        if cached is not None and version == self._geometry_version:
+            return cached  # no entry replaced since
+        self._geometry_version = version
         ids = list(self._entries)
         lines = [entry.polyline for entry in self._entries.values()]
         # (Polylines compare by identity: the same objects under the same ids.)
@@ -612,18 +627,19 @@ class PolylineMap:
         self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
         return self._geometry_cache
 
-    def _maybe_kept(self, scan_lines: Sequence[Polyline], indices: tuple[int, ...]) -> list[int]:
+    def _maybe_kept(self, scan_lines: PackedPolylines, indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
-        if self._keep_box is None:
+        if self._keep_box is None or not indices:
             return list(indices)
         # Extending an end moves it at most MAX_END_EXTENSION: the box grows by no more.
         xmin, ymin, xmax, ymax = self._keep_box
         reach = MAX_END_EXTENSION
+        boxes = scan_lines.boxes.tolist()
         return [
             index
             for index in indices
             if not (
-                (box := scan_lines[index].box)[0] > xmax + reach
+                (box := boxes[index])[0] > xmax + reach
                 or box[2] < xmin - reach
                 or box[1] > ymax + reach
                 or box[3] < ymin - reach
@@ -646,20 +662,20 @@ class PolylineMap:
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
             map_weights=[entry.edge_weights for entry in entries],
-            end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
+            end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
             trusted=True,  # the map's own polylines and weights, the scan's own parts
         )
+        store, new = self._entries, object.__new__
         for entry, (line, support) in zip(entries, merged, strict=True):
-            self._entries[entry.id] = _replaced(
-                entry,
-                polyline=line,
-                support=support if len(line) > 1 else None,
-                status="confirmed",
-                hits=entry.hits + 1,
-                misses=0,
-                last_seen=stamp,
-            )
+            # _replaced, field by field (once per merged polyline, twenty in a busy scan).
+            confirmed = new(MapPolyline)
+            fields = confirmed.__dict__
+            fields.update(entry.__dict__)
+            fields["polyline"], fields["support"] = line, support if support.size else None
+            fields["status"], fields["hits"], fields["misses"] = "confirmed", entry.hits + 1, 0
+            fields["last_seen"] = stamp
+            store[entry.id] = confirmed
         return set(by_map)
 
     def _weights_along(self, line: Polyline, parts: list[MapPolyline]) -> np.ndarray | None:
@@ -785,6 +801,24 @@ class PolylineMap:
         return joined
 
 
+class _Entries(dict):
+    """The map polylines by id, counting the replacements and deletions.
+
+    So that :meth:`PolylineMap._geometry` knows its cache still holds without comparing
+    every entry (several times per update).
+    """
+
+    version = 0
+
+    def __setitem__(self, map_id: int, entry: MapPolyline) -> None:
+        self.version += 1
+        super().__setitem__(map_id, entry)
+
+    def __delitem__(self, map_id: int) -> None:
+        self.version += 1
+        super().__delitem__(map_id)
+
+
 class _Geometry(NamedTuple):
     """The map's ids and polylines in map order, their packed vertices and boxes."""
 
@@ -797,9 +831,29 @@ class _Geometry(NamedTuple):
     """``(K, 4)`` bounding boxes."""
 
 
+def _associations(
+    triples: list[tuple[int, int, float]], ids: list[int]
+) -> tuple[Association, ...]:
+    """Return the :class:`Association` of each ``(scan index, map index, distance)``.
+
+    Built field by field (it has nothing to check): a few per scan, twenty in a busy one.
+    """
+    new = object.__new__
+    associations = []
+    for scan_index, map_index, distance in triples:
+        pair = new(Association)
+        fields = pair.__dict__
+        fields["scan_index"], fields["map_id"], fields["distance"] = (
+            scan_index, ids[map_index], distance
+        )
+        associations.append(pair)
+    return tuple(associations)
+
+
 def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
     pose = np.asarray(pose, dtype=float).reshape(3)
-    if not np.isfinite(pose).all():
+    # (Three Python floats: numpy's per-call cost would exceed the test itself.)
+    if not all(map(math.isfinite, pose.tolist())):
         raise ValueError(f"PolylineMap.{method}: pose must be a finite (x, y, theta), got {pose}")
     return pose
 

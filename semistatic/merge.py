@@ -382,6 +382,7 @@ def merge_weighted(
     them itself (the mapper, once per scan): every polyline and part a
     :class:`~semistatic.polyline.Polyline`, ``map_weights[k]`` a float64 array of one
     value >= 0 per edge, ``end_weights`` given, all >= 0. The result is the same.
+    Weights of a merged polyline are read-only views, as its vertices are.
 
     Examples
     --------
@@ -508,18 +509,19 @@ def _merged_checked(
     points, offsets = pack_vertices([line.points for line in lines])
     part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
-    first_parts = run_offsets((len(line_parts) for line_parts in parts), len(parts))
+    first_parts = run_offsets(map(len, parts), len(parts))
     merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
         points, offsets, weights, weight_offsets, part_points, part_offsets, first_parts,
         point_weights, tolerance, epsilon,
     )
     bounds, weight_bounds = merged_offsets.tolist(), merged_weight_offsets.tolist()
-    # Views of the one fresh array, frozen once (scan indices: vertex order).
+    # Views of the fresh arrays, frozen once (scan indices: vertex order).
     views = Polyline._views(merged, bounds, [
         _vertex_order(stop - start) for start, stop in itertools.pairwise(bounds)
     ])
+    merged_weights.flags.writeable = False
     return [
-        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]].copy())
+        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]])
         if is_changed else (line, edge_weights[k])
         for k, (line, view, is_changed) in enumerate(
             zip(lines, views, changed.tolist(), strict=True)

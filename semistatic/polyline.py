@@ -130,9 +130,8 @@ class Polyline:
 
         The arrays are frozen once and each polyline holds views of them (hot paths only,
         as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
-        all non-empty runs are found in one pass and cached as their :attr:`box`; the
-        result keeps the packed vertices and the boxes for the kernels
-        (:class:`PackedPolylines`).
+        all runs are found in one pass; the result keeps the packed vertices and the boxes
+        for the kernels (:class:`PackedPolylines`).
         """
         offsets = np.asarray(bounds, dtype=np.int64)  # (an int64 array as it is)
         bounds = offsets.tolist()
@@ -143,11 +142,11 @@ class Polyline:
         scan_indices.flags.writeable = False
         new = object.__new__
         lines = []
-        for start, stop, box in zip(bounds, bounds[1:], map(tuple, boxes.tolist()), strict=False):
+        for start, stop in itertools.pairwise(bounds):
             line = new(cls)
-            line.__dict__.update(
-                points=points[start:stop], scan_indices=scan_indices[start:stop], box=box
-            )
+            # (Item by item: cheaper than an update with keywords, once per scan polyline.)
+            state = line.__dict__
+            state["points"], state["scan_indices"] = points[start:stop], scan_indices[start:stop]
             lines.append(line)
         packed.extend(lines)
         return packed
@@ -162,10 +161,12 @@ class Polyline:
         (e.g. those of the polyline whose vertices were copied and moved) and no box.
         """
         points.flags.writeable = False
+        new = object.__new__
         lines = []
         for start, stop, indices in zip(bounds, bounds[1:], scan_indices, strict=False):
-            line = object.__new__(cls)
-            line.__dict__.update(points=points[start:stop], scan_indices=indices)
+            line = new(cls)
+            state = line.__dict__  # (as in _split)
+            state["points"], state["scan_indices"] = points[start:stop], indices
             lines.append(line)
         return lines
 
@@ -319,7 +320,11 @@ def frozen_polylines(lines: Sequence[Polyline]) -> tuple[Polyline, ...]:
     >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
     >>> type(frozen_polylines(lines)).__name__, type(frozen_polylines(list(lines))).__name__
     ('PackedPolylineTuple', 'tuple')
+    >>> (frozen := frozen_polylines(lines)) is frozen_polylines(frozen)
+    True
     """
+    if isinstance(lines, PackedPolylineTuple):
+        return lines  # frozen already (e.g. another map's report of the same scan)
     if is_packed(lines):
         return PackedPolylineTuple.of(lines)
     return tuple(lines)

@@ -19,7 +19,8 @@ their tangent function is empty and their similarity to anything is ``inf``, so 
 association never picks them on shape.
 
 One compiled kernel (numba) builds a tangent function and one takes the integral,
-whatever the size.
+whatever the size; other kernels call both (:func:`tangent_compiled`,
+:func:`integral_compiled`).
 
 Examples
 --------
@@ -41,7 +42,7 @@ from numpy.typing import ArrayLike
 from semistatic.frames import wrap_angle_compiled
 from semistatic.polyline import Polyline, as_polyline
 
-__all__ = ["similarity", "tangent_function"]
+__all__ = ["integral_compiled", "similarity", "tangent_compiled", "tangent_function"]
 
 # Polylines are immutable, so a polyline's tangent function is computed once and kept in
 # the polyline's own instance dictionary under this key (as ``functools.cached_property``
@@ -64,15 +65,25 @@ def _tangent(polyline: Polyline | ArrayLike) -> _Tangent:
 
 
 def _compute_tangent(points: np.ndarray) -> _Tangent:
-    breaks, angles, total = _tangent_kernel(np.array(points, dtype=np.float64, order="C"))
+    breaks, angles, total = tangent_compiled(np.array(points, dtype=np.float64, order="C"))
     breaks.flags.writeable = False
     angles.flags.writeable = False
     return breaks, angles, total
 
 
 @numba.njit(cache=True)
-def _tangent_kernel(points):  # pragma: no cover - compiled
-    """Return ``(breaks, angles, length)`` of ``(N, 2)`` vertices."""
+def tangent_compiled(points):  # pragma: no cover - compiled
+    """Return ``(breaks, angles, length)`` of ``(N, 2)`` vertices, inside compiled kernels.
+
+    :func:`tangent_function` and the length, for kernels that compare many polylines
+    (C-contiguous float64 vertices; no checks).
+
+    Examples
+    --------
+    >>> breaks, angles, length = tangent_compiled(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]]))
+    >>> breaks, angles.round(4), length
+    (array([0.  , 0.25, 1.  ]), array([0.    , 1.5708]), 4.0)
+    """
     count = max(points.shape[0] - 1, 0)
     lengths = np.empty(count)
     angles = np.empty(count)
@@ -107,8 +118,19 @@ def _tangent_kernel(points):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _integral_kernel(breaks0, angles0, breaks1, angles1):  # pragma: no cover - compiled
-    """Return ``integral (T1 - T0 - theta_0)^2 ds`` of two tangent functions."""
+def integral_compiled(breaks0, angles0, breaks1, angles1):  # pragma: no cover - compiled
+    """Return ``integral (T1 - T0 - theta_0)^2 ds`` of two tangent functions (compiled).
+
+    The integral of :func:`similarity` before its length ratio, for kernels that compare
+    many polylines (tangent functions from :func:`tangent_compiled`).
+
+    Examples
+    --------
+    >>> straight = tangent_compiled(np.array([[0.0, 0.0], [2.0, 0.0]]))
+    >>> corner = tangent_compiled(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]))
+    >>> round(integral_compiled(*straight[:2], *corner[:2]), 4)  # (pi / 4)^2
+    0.6169
+    """
     # Between consecutive breakpoints of the union both step functions are constant; a
     # repeated breakpoint only adds an interval of zero width. On [u_k, u_k+1) edge j of a
     # polyline applies when j of its inner breaks are at or before u_k.
@@ -204,5 +226,5 @@ def similarity(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
     breaks1, angles1, length1 = _tangent(p1)
     if length0 == 0.0 or length1 == 0.0:
         return math.inf
-    integral = _integral_kernel(breaks0, angles0, breaks1, angles1)
+    integral = integral_compiled(breaks0, angles0, breaks1, angles1)
     return integral * max(length1 / length0, length0 / length1)

@@ -46,6 +46,7 @@ __all__ = [
     "MIN_VISIBLE_FRACTION",
     "MISSING_FRACTION",
     "BeamCounts",
+    "cuts_and_misses",
     "expected_ranges",
     "extend_all_ends",
     "extend_ends",
@@ -364,17 +365,18 @@ def _mapper_view(scan: Scan, pose: ArrayLike, params: MapperParams) -> _View:
 
 
 def _beam_passes(
-    lines: Sequence[Polyline], view: _View, *, cut: bool, counted: bool = True,
+    lines: Sequence[Polyline], view: _View, *, cut: bool, counted_from: int = 0,
     packed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[BeamCounts], list[list[tuple[float, float]] | None]]:
-    """Return each polyline's :class:`BeamCounts` and, with ``cut``, its remaining spans.
+    """Return the polylines' :class:`BeamCounts` and, with ``cut``, their remaining spans.
 
     One compiled pass over all polylines (:func:`_through_polylines`). The spans are the
     arc-length intervals :func:`free_space_cut` keeps, ``None`` where nothing is cut.
     Polylines of fewer than two vertices are cut nowhere; their counts come from
-    :func:`expected_ranges` on every beam. Without ``counted`` the counts are left out
-    (an empty list). ``packed`` is ``(points, offsets, which)`` when the vertices of
-    ``lines`` are already packed: ``lines[k]`` is run ``which[k]``.
+    :func:`expected_ranges` on every beam. Counts are returned for
+    ``lines[counted_from:]`` only (none when ``counted_from`` is ``len(lines)``).
+    ``packed`` is ``(points, offsets, which)`` when the vertices of ``lines`` are
+    already packed: ``lines[k]`` is run ``which[k]``.
     """
     if not lines:
         return [], []
@@ -393,8 +395,8 @@ def _beam_passes(
     )
     beam_counts = [
         BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view)
-        for line, row in zip(lines, counts.tolist(), strict=True)
-    ] if counted else []
+        for line, row in zip(lines[counted_from:], counts[counted_from:].tolist(), strict=True)
+    ]
     spans, stored = [], 0
     pieces = pieces.tolist()
     for number in piece_counts.tolist():
@@ -672,14 +674,7 @@ def missed_and_cut(
     ...  for missing, pieces in missed_and_cut([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
     [(True, 0), (False, 1)]
     """
-    counts, spans = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=True)
-    return [
-        (
-            _missing(number, params),
-            [line] if kept is None else [_arc_piece(line, low, high) for low, high in kept],
-        )
-        for line, number, kept in zip(polylines, counts, spans, strict=True)
-    ]
+    return cuts_and_misses([], polylines, scan, pose, params)[1]
 
 
 def free_space_cuts(
@@ -704,14 +699,40 @@ def free_space_cuts(
     ...  for pieces in free_space_cuts([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
     [2, None]
     """
+    return cuts_and_misses(polylines, [], scan, pose, params, packed=packed)[0]
+
+
+def cuts_and_misses(
+    cut: Sequence[Polyline], checked: Sequence[Polyline], scan: Scan, pose: ArrayLike,
+    params: MapperParams, *, packed: tuple[np.ndarray, np.ndarray, ArrayLike] | None = None,
+) -> tuple[list[list[Polyline] | None], list[tuple[bool, list[Polyline]]]]:
+    """Return :func:`free_space_cuts` of ``cut`` and :func:`missed_and_cut` of ``checked``.
+
+    Both in one compiled pass (the mapper's per-scan check of the polylines it merged and
+    of those it did not pair). ``packed`` is ``(points, offsets, which)`` when the
+    vertices of both are already packed: ``[*cut, *checked][k]`` is run ``which[k]``.
+
+    Examples
+    --------
+    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
+    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
+    >>> cuts, checks = cuts_and_misses([far], [wall], scan, (0.0, 0.0, 0.0), MapperParams())
+    >>> cuts, [(missing, len(pieces)) for missing, pieces in checks]
+    ([None], [(True, 0)])
+    """
+    lines = [*cut, *checked]
     if packed is not None:
         points, offsets, which = packed
         packed = (points, offsets, np.asarray(which, dtype=np.int64))
-    _, spans = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=True,
-                            counted=False, packed=packed)
-    return [
+    counts, spans = _beam_passes(lines, _mapper_view(scan, pose, params), cut=True,
+                                 counted_from=len(cut), packed=packed)
+    pieces = [
         None if kept is None else [_arc_piece(line, low, high) for low, high in kept]
-        for line, kept in zip(polylines, spans, strict=True)
+        for line, kept in zip(lines, spans, strict=True)
+    ]
+    return pieces[: len(cut)], [
+        (_missing(number, params), [line] if kept is None else kept)
+        for line, number, kept in zip(checked, counts, pieces[len(cut):], strict=True)
     ]
 
 

@@ -22,7 +22,8 @@ from semistatic.association import FAR_COST, _optimal_path
 from semistatic.extraction import douglas_peucker
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, _replaced
-from semistatic.polyline import EMPTY_BOX, Polyline
+from semistatic.polyline import EMPTY_BOX, Polyline, pack_vertices
+from semistatic.similarity import similarity
 from semistatic.types import Scan
 from semistatic.visibility import extend_ends
 from tests.semistatic.conftest import NASTY_POLYLINES
@@ -135,7 +136,7 @@ def test_mapper_without_the_forced_association_path_gives_the_same_map(monkeypat
     ]
     fast_map, fast_reports = _run(scans, poses)
     assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
-    monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+    monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
         assert [(a.scan_index, a.map_id) for a in fast.associated] == [
@@ -209,14 +210,8 @@ def _scene_polylines(rng, count):
 
 
 def test_forced_association_path_equals_the_full_recursion(monkeypatch):
-    original = association_module._forced_path
     forced = []
-
-    def recording(*args):
-        path = original(*args)
-        forced.append(path is not None)
-        return path
-
+    costs = association_module._similarity_costs
     for seed in range(80):
         rng = np.random.default_rng(seed)
         maps = _scene_polylines(rng, int(rng.integers(1, 8)))
@@ -226,14 +221,36 @@ def test_forced_association_path_equals_the_full_recursion(monkeypatch):
         scans += _scene_polylines(rng, int(rng.integers(0, 3)))
         gate = float(rng.choice([0.12, 0.5, 1.5]))
         viewpoint = (0.0, 0.0, float(rng.uniform(-math.pi, math.pi)))
-        monkeypatch.setattr(association_module, "_forced_path", recording)
+        calls = []
+        monkeypatch.setattr(association_module, "_similarity_costs",
+                            lambda *args, calls=calls: calls.append(1) or costs(*args))
+        monkeypatch.setattr(association_module, "_FORCED_PATHS", True)
         fast = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
-        monkeypatch.setattr(association_module, "_forced_path", lambda *args: None)
+        forced.append(not calls)
+        monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
         slow = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
         assert fast == slow, seed
     # Both branches were exercised: paths fixed by the gate alone, and paths that needed
     # the similarities.
     assert 10 <= sum(forced) <= len(forced) - 10
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_similarity_costs_equal_the_similarity_of_each_pair(seed):
+    rng = np.random.default_rng(seed)
+    scans = _scene_polylines(rng, int(rng.integers(1, 5)))
+    maps = _scene_polylines(rng, int(rng.integers(1, 5)))
+    feasible = rng.random((len(scans), len(maps))) < 0.7
+    scan_points, scan_bounds = pack_vertices(scans)
+    map_points, map_bounds = pack_vertices(maps)
+    costs = association_module._similarity_costs(
+        feasible, scan_points, scan_bounds, map_points, map_bounds
+    )
+    for a, scan in enumerate(scans):
+        for b, line in enumerate(maps):
+            value = similarity(scan, line)
+            expected = value if feasible[a, b] and value < FAR_COST else FAR_COST
+            assert costs[a, b] == expected, (a, b)
 
 
 def test_forced_path_needs_one_best_path():
@@ -243,15 +260,18 @@ def test_forced_path_needs_one_best_path():
     # similarities, so they must be computed.
     points = np.concatenate((line.points, line.points))
     bounds = np.array([0, 2, 4])
-    assert association_module._forced_path(two_ways, points, bounds, points, bounds) is None
+    forced = association_module._forced_kernel
+    assert not forced(two_ways, points, bounds, points, bounds)[1]
     diagonal = np.eye(2, dtype=bool)
-    path = association_module._forced_path(diagonal, points, bounds, points, bounds)
+    path, fixed = forced(diagonal, points, bounds, points, bounds)
+    assert fixed
     assert path.tolist() == [[0, 0], [1, 1]]
 
 
 def test_a_typical_update_computes_no_similarity(monkeypatch):
     calls = []
-    monkeypatch.setattr(association_module, "similarity", lambda *args: calls.append(args) or 0.0)
+    monkeypatch.setattr(association_module, "_similarity_costs",
+                        lambda *args: calls.append(args) or np.zeros(args[0].shape))
     rng = np.random.default_rng(4)
     world = _hall()
     mapper = PolylineMap()
