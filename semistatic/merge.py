@@ -429,7 +429,7 @@ def transfer_weights(
     # Writeable copies: the kernels take the argument types the merge gives them.
     points = np.array(as_polyline(polyline).points)
     vertices = np.array(as_polyline(source).points)
-    weights = np.asarray(weights, dtype=float).reshape(-1)
+    weights = np.array(weights, dtype=float).reshape(-1)
     if weights.size != max(vertices.shape[0] - 1, 0):
         raise ValueError(
             f"transfer_weights: need one weight per source edge ({max(vertices.shape[0] - 1, 0)}),"
