@@ -316,6 +316,13 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
                 ))
         try:
             _compile(shares(kernels, count, WORKER_START_S)[0])
+        except BaseException:
+            # Interrupted (Ctrl-C reaches a worker only from a terminal): stop the workers
+            # now rather than wait for them. A worker stopped while publishing leaves no
+            # file half-written (each is linked in whole).
+            for process in started:
+                process.kill()
+            raise
         finally:
             for process in started:
                 try:

@@ -114,6 +114,33 @@ def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
     assert kernel_cache.warm_kernel_cache() is False
 
 
+def test_an_interruption_stops_the_workers_at_once(monkeypatch):
+    class Worker:
+        killed = waited = False
+
+        def __init__(self, *args, **kwargs):
+            workers.append(self)
+
+        def kill(self):
+            self.killed = True
+
+        def wait(self, timeout=None):
+            self.waited = True
+
+    def interrupted(kernels):
+        raise KeyboardInterrupt
+
+    workers: list[Worker] = []
+    monkeypatch.setenv(kernel_cache.SWITCH, "1")
+    monkeypatch.setattr(subprocess, "Popen", Worker)
+    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "_compile", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        kernel_cache.warm_kernel_cache(workers=2)
+    assert len(workers) == 2
+    assert all(worker.killed and worker.waited for worker in workers)
+
+
 def test_a_kernel_that_cannot_be_compiled_is_left_to_lazy_compilation():
     kernel_cache._compile([
         Kernel("semistatic.frames.no_such_kernel", ("float64",), 0.1),
