@@ -1,15 +1,22 @@
 """Call every compiled kernel once and print the seconds it took (the start-up cost).
 
 Run in a fresh process: with an empty ``NUMBA_CACHE_DIR`` it measures compilation (the
-first run after installation), with the cache filled by that run it measures loading the
+first run after installation: :func:`scenarios.kernel_cache.warm_kernel_cache` first, as
+a run starts, then the calls), with the cache filled by that run it measures loading the
 cached machine code (every later run). ``benchmarks/test_bench_goals.py`` runs it both
 ways; by hand::
 
     NUMBA_CACHE_DIR=$(mktemp -d) .venv/bin/python -m benchmarks.kernel_warmup
+
+``--record`` (empty cache, ``SEMISTATIC_PARALLEL_COMPILE=0``) writes the kernels the calls
+compiled, with their argument types and compile seconds, to
+``scenarios/kernel_signatures.toml``; ``--check`` prints the differences to that file.
 """
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 
 import numpy as np
@@ -19,6 +26,14 @@ from benchmarks.test_bench_mapper import hall
 from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, detect_landmarks
 from robots.path import SplinePath
+from scenarios.kernel_cache import (
+    SIGNATURES_FILE,
+    SWITCH,
+    Kernel,
+    load_kernels,
+    type_text,
+    warm_kernel_cache,
+)
 from semistatic.association import associate, sort_ccw
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
 from semistatic.mapper import PolylineMap
@@ -36,6 +51,7 @@ def warm_up() -> float:
     scans = [cast_scan(segments, np.zeros(3), noise=0.01, rng=rng, stamp=0.1 * k) for k in range(3)]
     path = SplinePath([(0.0, 0.0), (2.0, 0.0), (3.0, 1.0)])
     start = time.perf_counter()
+    warm_kernel_cache()
     mapper = PolylineMap()
     for scan in scans:
         mapper.update(scan, np.zeros(3))
@@ -60,5 +76,59 @@ def warm_up() -> float:
     return time.perf_counter() - start
 
 
+def compiled_kernels() -> tuple[list[Kernel], float]:
+    """Run :func:`warm_up` and return the kernels it compiled from Python, and its seconds.
+
+    Each kernel's seconds include the compilation of the functions it calls that were
+    not compiled before (numba's compile events, outermost ones only).
+    """
+    from numba.core import event
+
+    found: list[Kernel] = []
+    started: list[float] = []
+
+    class Outermost(event.Listener):
+        def on_start(self, item: event.Event) -> None:
+            started.append(time.perf_counter())
+
+        def on_end(self, item: event.Event) -> None:
+            seconds = time.perf_counter() - started.pop()
+            dispatcher = item.data["dispatcher"]
+            if not started and not dispatcher.py_func.__module__.startswith("numba"):
+                function = f"{dispatcher.py_func.__module__}.{dispatcher.py_func.__qualname__}"
+                arguments = tuple(type_text(argument) for argument in item.data["args"])
+                found.append(Kernel(function, arguments, round(seconds, 2)))
+
+    with event.install_listener("numba:compile", Outermost()):
+        seconds = warm_up()
+    return found, seconds
+
+
+def _signature_file(kernels: list[Kernel]) -> str:
+    lines = ["# The kernels a first `semistatic run` compiles (scenarios/kernel_cache.py).",
+             "# Written by `python -m benchmarks.kernel_warmup --record`: do not edit.", ""]
+    for kernel in kernels:
+        arguments = ", ".join(f'"{text}"' for text in kernel.arguments)
+        lines += ["[[kernel]]", f'function = "{kernel.function}"',
+                  f"arguments = [{arguments}]", f"seconds = {kernel.seconds}", ""]
+    return "\n".join(lines)
+
+
+def _unrecorded(found: list[Kernel]) -> list[str]:
+    recorded = {(kernel.function, kernel.arguments) for kernel in load_kernels()}
+    compiled = {(kernel.function, kernel.arguments) for kernel in found}
+    return ([f"not recorded: {item}" for item in sorted(compiled - recorded)]
+            + [f"not compiled: {item}" for item in sorted(recorded - compiled)])
+
+
 if __name__ == "__main__":
-    print(f"{warm_up():.3f}")
+    if sys.argv[1:] in (["--record"], ["--check"]):
+        os.environ[SWITCH] = "0"  # every kernel compiled here, in this process
+    if sys.argv[1:] == ["--record"]:
+        kernels, _ = compiled_kernels()
+        SIGNATURES_FILE.write_text(_signature_file(kernels))
+        print(f"{len(kernels)} kernels written to {SIGNATURES_FILE}")
+    elif sys.argv[1:] == ["--check"]:
+        print("\n".join(_unrecorded(compiled_kernels()[0])) or "same")
+    else:
+        print(f"{warm_up():.3f}")

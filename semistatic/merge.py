@@ -173,8 +173,9 @@ def project_onto(points: ArrayLike, polyline: Polyline | ArrayLike) -> Projectio
     >>> found.arc, found.distance, found.before
     (array([1., 0.]), array([0.5, 1. ]), array([False,  True]))
     """
-    points = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2))
-    vertices = _distinct(as_polyline(polyline).points)
+    # Copies: one argument type, writeable, for every caller of the kernels.
+    points = np.array(points, dtype=float).reshape(-1, 2)
+    vertices = _distinct(np.array(as_polyline(polyline).points))
     if vertices.shape[0] < 2:
         raise ValueError(
             "project_onto: the polyline needs at least two distinct vertices, "
@@ -195,7 +196,7 @@ def distinct_vertices(points: ArrayLike) -> np.ndarray:
     array([[0., 0.],
            [1., 0.]])
     """
-    return _distinct(np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 2)))
+    return _distinct(np.array(points, dtype=float).reshape(-1, 2))  # writeable, as in merge
 
 
 # The scan indices 0..N-1 of merged polylines, one read-only array per N.
@@ -426,16 +427,18 @@ def transfer_weights(
     >>> transfer_weights([[0.5, 0.0], [1.0, 0.0], [1.0, 0.5], [1.0, 2.0]], box, [7.0, 9.0], 0.05)
     array([7., 9., 0.])
     """
-    points = np.ascontiguousarray(as_polyline(polyline).points)
-    vertices = as_polyline(source).points
-    weights = np.asarray(weights, dtype=float).reshape(-1)
+    # Writeable copies: the kernels take the argument types the merge gives them.
+    points = np.array(as_polyline(polyline).points)
+    vertices = np.array(as_polyline(source).points)
+    weights = np.array(weights, dtype=float).reshape(-1)
     if weights.size != max(vertices.shape[0] - 1, 0):
         raise ValueError(
             f"transfer_weights: need one weight per source edge ({max(vertices.shape[0] - 1, 0)}),"
             f" got {weights.size}"
         )
     distinct, distinct_weights = _distinct_weighted(vertices, weights)
-    return _transfer(points, distinct, distinct_weights, float(tolerance))
+    along = _edges_along(points, distinct, float(tolerance))
+    return _weights_of(along, distinct_weights)
 
 
 def _merged_parts(
@@ -543,6 +546,10 @@ def _merge_all(
     merged vertices one polyline after the other, their offsets, their edge weights, the
     weights' offsets and which polylines changed (an observation without vertices changes
     nothing).
+
+    Per map polyline, ``line_weights`` are its edge weights before this observation (the
+    map's side of each average: the parts of one observation all weigh against them),
+    ``line_totals`` those with the parts of this observation merged so far.
     """
     count = offsets.size - 1
     merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
@@ -573,7 +580,7 @@ def _merge_all(
                 # A point has no extent to average: the scan's shape wins, the point may
                 # extend it.
                 line = _extend_with_point(new, old[0], tolerance)
-                line_totals = _transfer(line, new, new_weights, tolerance)
+                line_totals = _weights_of(_edges_along(line, new, tolerance), new_weights)
                 line_weights = np.zeros(line_totals.size)
             elif new.shape[0] == 1:
                 line = _extend_with_point(old, new[0], tolerance)
@@ -581,10 +588,141 @@ def _merge_all(
                 line_weights = _weights_of(along, old_weights)
                 line_totals = _weights_of(along, old_totals)
             else:
-                line, line_weights, line_totals = _merged(
-                    old, old_weights, old_totals, new, new_weights, point_weights[k], tolerance,
-                    epsilon
-                )
+                # The merge proper (DESIGN.md detail 7), written out here rather than as a
+                # kernel of its own: numba re-optimises a callee's whole code inside each
+                # caller, so one level less halves the compilation of everything below.
+                # First the scan's direction along the map, and the map's ends the scan
+                # contradicts cut off (once).
+                end_weight = point_weights[k]
+                cut = True
+                source, source_weights, source_totals = old, old_weights, old_totals
+                while True:
+                    arcs, feet, distances, before, after = _project(new, old)
+                    if arcs[0] > arcs[-1] or (
+                        arcs[0] == arcs[-1]
+                        and (new[-1, 0] - new[0, 0]) * (old[-1, 0] - old[0, 0])
+                        + (new[-1, 1] - new[0, 1]) * (old[-1, 1] - old[0, 1])
+                        < 0.0
+                    ):
+                        new, new_weights = new[::-1].copy(), new_weights[::-1].copy()
+                        arcs, feet = arcs[::-1].copy(), feet[::-1].copy()
+                        distances = distances[::-1].copy()
+                        before, after = before[::-1].copy(), after[::-1].copy()
+                    if not cut:
+                        break
+                    cut = False
+                    uncontradicted = _contradicted(old, new, arcs, distances, before, after,
+                                                   tolerance)
+                    if uncontradicted.shape[0] == 0:
+                        break
+                    old = uncontradicted
+                    along = _edges_along(old, source, tolerance)
+                    old_weights = _weights_of(along, source_weights)
+                    old_totals = _weights_of(along, source_totals)
+                scan_arcs, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
+                map_arcs = _arc_starts(old)
+                scan_starts = _arc_starts(new)
+                # Map vertices facing the scan move toward it, by the scan's share of the
+                # weight there.
+                moved = old.copy()
+                for v in range(old.shape[0]):
+                    if not (scan_before[v] or scan_after[v]) and scan_distances[v] <= tolerance:
+                        alpha = _share(new_weights[_edge_at(scan_starts, scan_arcs[v])],
+                                       _vertex_weight(old_weights, v))
+                        moved[v, 0] += alpha * (scan_feet[v, 0] - old[v, 0])
+                        moved[v, 1] += alpha * (scan_feet[v, 1] - old[v, 1])
+                # Scan vertices facing the map are inserted, pulled toward the map by its
+                # weight.
+                inserted = np.empty(new.shape[0], np.bool_)
+                for v in range(new.shape[0]):
+                    inserted[v] = not (before[v] or after[v])
+                scan_count = new.shape[0]
+                prepend, append = 0, 0
+
+                # Start: by how much does the scan reach beyond the map's start?
+                reach = distances[0] if before[0] else -arcs[0]
+                if reach > tolerance:
+                    prepend = _run_length(before)
+                elif reach >= -tolerance:
+                    alpha = _share(new_weights[0], end_weight)
+                    moved[0, 0] = old[0, 0] + alpha * (new[0, 0] - old[0, 0])
+                    moved[0, 1] = old[0, 1] + alpha * (new[0, 1] - old[0, 1])
+                    inserted[0] = False
+                # End: the same, mirrored.
+                reach = distances[-1] if after[-1] else arcs[-1] - map_arcs[-1]
+                if reach > tolerance:
+                    append = _run_length(after[::-1].copy())
+                elif reach >= -tolerance:
+                    alpha = _share(new_weights[-1], end_weight)
+                    moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
+                    moved[-1, 1] = old[-1, 1] + alpha * (new[-1, 1] - old[-1, 1])
+                    inserted[-1] = False
+
+                # Map vertices first on equal arc length, then scan vertices in scan order:
+                # listed in that order, a stable sort by arc length keeps it.
+                total = old.shape[0]
+                for v in range(scan_count):
+                    total += inserted[v]
+                keys, middle = np.empty(total), np.empty((total, 2))
+                for v in range(old.shape[0]):
+                    keys[v] = map_arcs[v]
+                _put_rows(moved, 0, old.shape[0], middle, 0)
+                row = old.shape[0]
+                for v in range(scan_count):
+                    if not inserted[v]:
+                        continue
+                    # An inner scan vertex farther than epsilon from a map edge that cuts a
+                    # corner is averaged with the corner the map's faces imply, not with its
+                    # foot on the chord: pulled toward the chord, it would lie within epsilon
+                    # of it once the map stands for a few observations, Douglas-Peucker would
+                    # drop it every time, and the map could never learn the corner.
+                    anchor_x, anchor_y = feet[v, 0], feet[v, 1]
+                    if 0 < v < scan_count - 1 and distances[v] > epsilon:
+                        found, corner_x, corner_y = _cut_corner(old, map_arcs, arcs[v], new[v],
+                                                                epsilon)
+                        if found:
+                            anchor_x, anchor_y = corner_x, corner_y
+                    keys[row] = arcs[v]
+                    alpha = _share(_vertex_weight(new_weights, v),
+                                   old_weights[_edge_at(map_arcs, arcs[v])])
+                    middle[row, 0] = anchor_x + alpha * (new[v, 0] - anchor_x)
+                    middle[row, 1] = anchor_y + alpha * (new[v, 1] - anchor_y)
+                    row += 1
+                # The candidates before Douglas-Peucker (>= 2 rows), and per candidate edge
+                # the weights of ``old`` and the totals with the scan's added where each lies
+                # along them (0 where nothing does).
+                candidates = np.empty((prepend + total + append, 2))
+                size = 0
+                for v in range(prepend):
+                    if distances[v] > tolerance:
+                        _put_rows(new, v, v + 1, candidates, size)
+                        size += 1
+                # Insertion sort by arc length, stable (a handful of vertices).
+                for v in range(1, total):
+                    key, x, y = keys[v], middle[v, 0], middle[v, 1]
+                    at = v
+                    while at > 0 and keys[at - 1] > key:
+                        keys[at] = keys[at - 1]
+                        middle[at, 0], middle[at, 1] = middle[at - 1, 0], middle[at - 1, 1]
+                        at -= 1
+                    keys[at], middle[at, 0], middle[at, 1] = key, x, y
+                _put_rows(middle, 0, total, candidates, size)
+                size += total
+                for v in range(scan_count - append, scan_count):
+                    if distances[v] > tolerance:
+                        _put_rows(new, v, v + 1, candidates, size)
+                        size += 1
+                keep = np.ones(size, np.bool_)
+                for v in range(1, size):
+                    gap = math.hypot(candidates[v, 0] - candidates[v - 1, 0],
+                                     candidates[v, 1] - candidates[v - 1, 1])
+                    keep[v] = gap > DUPLICATE_DISTANCE
+                candidates = candidates[:size][keep]
+                along = _edges_along(candidates, old, tolerance)
+                totals = _weights_of(along, old_totals)
+                totals += _weights_of(_edges_along(candidates, new, tolerance), new_weights)
+                line, line_weights = candidates, _weights_of(along, old_weights)
+                line_totals = totals
             # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
             kept = douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)
             line_weights = _kept_weights(line, line_weights, kept)
@@ -752,141 +890,6 @@ def _cut_corner(
 
 
 @numba.njit(cache=True)
-def _merged(
-    old: np.ndarray, old_weights: np.ndarray, old_totals: np.ndarray, new: np.ndarray,
-    new_weights: np.ndarray, end_weight: float, tolerance: float, epsilon: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Return the merge candidates of :func:`merge` before Douglas-Peucker (>= 2 rows).
-
-    ``old_weights`` are the edge weights of ``old`` before this observation (the map's
-    side of each average: the parts of one observation all weigh against them),
-    ``old_totals`` with the parts of this observation merged so far, ``new_weights`` the
-    scan's. Returns the candidates and, per candidate edge, the weights of ``old`` and
-    the totals with the scan's added where each lies along them (0 where nothing does).
-    """
-    cut = True
-    source, source_weights, source_totals = old, old_weights, old_totals
-    while True:
-        arcs, feet, distances, before, after = _project(new, old)
-        if arcs[0] > arcs[-1] or (
-            arcs[0] == arcs[-1]
-            and (new[-1, 0] - new[0, 0]) * (old[-1, 0] - old[0, 0])
-            + (new[-1, 1] - new[0, 1]) * (old[-1, 1] - old[0, 1])
-            < 0.0
-        ):
-            new, new_weights = new[::-1].copy(), new_weights[::-1].copy()
-            arcs, feet, distances = arcs[::-1].copy(), feet[::-1].copy(), distances[::-1].copy()
-            before, after = before[::-1].copy(), after[::-1].copy()
-        if not cut:
-            break
-        cut = False
-        kept = _contradicted(old, new, arcs, distances, before, after, tolerance)
-        if kept.shape[0] == 0:
-            break
-        old = kept
-        along = _edges_along(old, source, tolerance)
-        old_weights = _weights_of(along, source_weights)
-        old_totals = _weights_of(along, source_totals)
-    scan_arcs, scan_feet, scan_distances, scan_before, scan_after = _project(old, new)
-    map_arcs = _arc_starts(old)
-    scan_starts = _arc_starts(new)
-    # Map vertices facing the scan move toward it, by the scan's share of the weight there.
-    moved = old.copy()
-    for k in range(old.shape[0]):
-        if not (scan_before[k] or scan_after[k]) and scan_distances[k] <= tolerance:
-            alpha = _share(new_weights[_edge_at(scan_starts, scan_arcs[k])],
-                           _vertex_weight(old_weights, k))
-            moved[k, 0] += alpha * (scan_feet[k, 0] - old[k, 0])
-            moved[k, 1] += alpha * (scan_feet[k, 1] - old[k, 1])
-    # Scan vertices facing the map are inserted, pulled toward the map by its weight.
-    inserted = np.empty(new.shape[0], np.bool_)
-    for k in range(new.shape[0]):
-        inserted[k] = not (before[k] or after[k])
-    count = new.shape[0]
-    prepend, append = 0, 0
-
-    # Start: by how much does the scan reach beyond the map's start?
-    reach = distances[0] if before[0] else -arcs[0]
-    if reach > tolerance:
-        prepend = _run_length(before)
-    elif reach >= -tolerance:
-        alpha = _share(new_weights[0], end_weight)
-        moved[0, 0] = old[0, 0] + alpha * (new[0, 0] - old[0, 0])
-        moved[0, 1] = old[0, 1] + alpha * (new[0, 1] - old[0, 1])
-        inserted[0] = False
-    # End: the same, mirrored.
-    reach = distances[-1] if after[-1] else arcs[-1] - map_arcs[-1]
-    if reach > tolerance:
-        append = _run_length(after[::-1].copy())
-    elif reach >= -tolerance:
-        alpha = _share(new_weights[-1], end_weight)
-        moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
-        moved[-1, 1] = old[-1, 1] + alpha * (new[-1, 1] - old[-1, 1])
-        inserted[-1] = False
-
-    # Map vertices first on equal arc length, then scan vertices in scan order: listed in
-    # that order, a stable sort by arc length keeps it.
-    total = old.shape[0]
-    for k in range(count):
-        total += inserted[k]
-    keys, middle = np.empty(total), np.empty((total, 2))
-    for k in range(old.shape[0]):
-        keys[k] = map_arcs[k]
-    _put_rows(moved, 0, old.shape[0], middle, 0)
-    row = old.shape[0]
-    for k in range(count):
-        if not inserted[k]:
-            continue
-        # An inner scan vertex farther than epsilon from a map edge that cuts a corner is
-        # averaged with the corner the map's faces imply, not with its foot on the chord:
-        # pulled toward the chord, it would lie within epsilon of it once the map stands
-        # for a few observations, Douglas-Peucker would drop it every time, and the map
-        # could never learn the corner.
-        anchor_x, anchor_y = feet[k, 0], feet[k, 1]
-        if 0 < k < count - 1 and distances[k] > epsilon:
-            found, corner_x, corner_y = _cut_corner(old, map_arcs, arcs[k], new[k], epsilon)
-            if found:
-                anchor_x, anchor_y = corner_x, corner_y
-        keys[row] = arcs[k]
-        alpha = _share(_vertex_weight(new_weights, k),
-                       old_weights[_edge_at(map_arcs, arcs[k])])
-        middle[row, 0] = anchor_x + alpha * (new[k, 0] - anchor_x)
-        middle[row, 1] = anchor_y + alpha * (new[k, 1] - anchor_y)
-        row += 1
-    candidates = np.empty((prepend + total + append, 2))
-    size = 0
-    for k in range(prepend):
-        if distances[k] > tolerance:
-            _put_rows(new, k, k + 1, candidates, size)
-            size += 1
-    # Insertion sort by arc length, stable (a handful of vertices).
-    for k in range(1, total):
-        key, x, y = keys[k], middle[k, 0], middle[k, 1]
-        at = k
-        while at > 0 and keys[at - 1] > key:
-            keys[at] = keys[at - 1]
-            middle[at, 0], middle[at, 1] = middle[at - 1, 0], middle[at - 1, 1]
-            at -= 1
-        keys[at], middle[at, 0], middle[at, 1] = key, x, y
-    _put_rows(middle, 0, total, candidates, size)
-    size += total
-    for k in range(count - append, count):
-        if distances[k] > tolerance:
-            _put_rows(new, k, k + 1, candidates, size)
-            size += 1
-    keep = np.ones(size, np.bool_)
-    for k in range(1, size):
-        gap = math.hypot(candidates[k, 0] - candidates[k - 1, 0],
-                         candidates[k, 1] - candidates[k - 1, 1])
-        keep[k] = gap > DUPLICATE_DISTANCE
-    candidates = candidates[:size][keep]
-    along = _edges_along(candidates, old, tolerance)
-    totals = _weights_of(along, old_totals)
-    totals += _transfer(candidates, new, new_weights, tolerance)
-    return candidates, _weights_of(along, old_weights), totals
-
-
-@numba.njit(cache=True)
 def _share(scan_weight: float, map_weight: float) -> float:  # pragma: no cover - compiled
     """Return how far the map moves toward the scan: the scan's share of the weight."""
     total = scan_weight + map_weight
@@ -911,23 +914,15 @@ def _vertex_weight(weights: np.ndarray, vertex: int) -> float:  # pragma: no cov
 
 
 @numba.njit(cache=True)
-def _transfer(
-    points: np.ndarray, source: np.ndarray, weights: np.ndarray, tolerance: float
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Return, per edge of ``points``, the weight of the ``source`` edge it lies along.
-
-    An edge lies along the ``source`` edge its midpoint projects onto, within
-    ``tolerance`` and inside the source's extent; elsewhere its weight is 0 (nothing of
-    ``source`` supports it). ``source`` has distinct vertices, ``weights`` one per edge.
-    """
-    return _weights_of(_edges_along(points, source, tolerance), weights)
-
-
-@numba.njit(cache=True)
 def _edges_along(
     points: np.ndarray, source: np.ndarray, tolerance: float
 ) -> np.ndarray:  # pragma: no cover - compiled
-    """Return per edge of ``points`` the ``source`` edge it lies along, or -1 (see _transfer)."""
+    """Return per edge of ``points`` the ``source`` edge it lies along, or -1.
+
+    An edge lies along the ``source`` edge its midpoint projects onto, within
+    ``tolerance`` and inside the source's extent; elsewhere it lies along none (nothing of
+    ``source`` supports it: weight 0). ``source`` has distinct vertices.
+    """
     edges = max(points.shape[0] - 1, 0)
     found = np.full(edges, -1, np.int64)
     if edges == 0 or source.shape[0] < 2:

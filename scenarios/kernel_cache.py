@@ -1,0 +1,337 @@
+"""Compile the numba kernels of a cold cache on every core before the first run (issue 13).
+
+The kernels compile on first use and are cached on disk (``@njit(cache=True)``), so the
+first run after installation compiles them all, one after the other on one core. When
+that cache is cold, :func:`warm_kernel_cache` compiles them in parallel instead: this
+process compiles one share of the kernels, ``os.cpu_count() - 1`` worker processes the
+others, each worker into a private cache directory that it then publishes into numba's
+cache without replacing any file there (:func:`publish`). The run that follows loads
+those kernels from the cache. The machine code is the same whichever process compiles
+it: results do not change.
+
+Why private directories: numba writes each cache file to a temporary name and renames it
+(atomic), but a function's index (signature -> data file) is read, extended and written
+back, so two processes saving *different* signatures of one function at the same time can
+both give theirs the same data file: one of them would later load the other's code.
+
+Which kernels, with which argument types, is recorded in ``kernel_signatures.toml``
+beside this module by ``python -m benchmarks.kernel_warmup --record`` (the signatures a
+first ``semistatic run`` compiles; a slow test checks the file against a fresh compile).
+A kernel missing from it, a worker that fails or a cache that cannot be written leaves
+the kernel to numba's lazy compilation, as without this module.
+``SEMISTATIC_PARALLEL_COMPILE=0`` turns it off.
+
+Examples
+--------
+>>> [type_text(parse_type(text)) for text in ("float64", "readonly array(float64, 1)")]
+['float64', 'readonly array(float64, 1)']
+>>> [[kernel.function for kernel in share] for share in shares([
+...     Kernel("m.a", (), 3.0), Kernel("n.b", (), 2.0), Kernel("o.c", (), 2.0)], 2)]
+[['m.a'], ['n.b', 'o.c']]
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import tomllib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = [
+    "SIGNATURES_FILE",
+    "SWITCH",
+    "Kernel",
+    "is_cold",
+    "load_kernels",
+    "parse_type",
+    "publish",
+    "shares",
+    "type_text",
+    "warm_kernel_cache",
+]
+
+SIGNATURES_FILE = Path(__file__).with_name("kernel_signatures.toml")
+"""The kernels a first run compiles: function, argument types, compile seconds."""
+
+SWITCH = "SEMISTATIC_PARALLEL_COMPILE"
+"""Environment variable: ``0`` compiles lazily in the run, one kernel after the other."""
+
+WORKER_TIMEOUT_S = 600.0
+"""A worker still compiling after this long is stopped (its kernels compile lazily)."""
+
+WORKER_START_S = 1.5
+"""What starting a worker costs before it compiles (interpreter, imports): its share is
+that much smaller."""
+
+_SCALARS = ("bool", "float64", "int64")
+_ARRAY = re.compile(r"(readonly )?array\((bool|float64|int64), ([1-9])\)")
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """A compiled function and one signature: ``module.qualname``, argument types, cost.
+
+    Examples
+    --------
+    >>> Kernel("semistatic.frames.wrap_angle_compiled", ("float64",), 0.05).module
+    'semistatic.frames'
+    """
+
+    function: str
+    arguments: tuple[str, ...]
+    seconds: float
+
+    @property
+    def module(self) -> str:
+        """The module that defines the function."""
+        return self.function.rpartition(".")[0]
+
+
+def parse_type(text: str) -> object:
+    """Return the numba type ``text`` names (:func:`type_text`'s format, C-contiguous arrays).
+
+    Examples
+    --------
+    >>> parse_type("array(int64, 2)")
+    Array(int64, 2, 'C', False, aligned=True)
+    """
+    from numba import types
+
+    if text in _SCALARS:
+        return getattr(types, "boolean" if text == "bool" else text)
+    match = _ARRAY.fullmatch(text)
+    if match is None:
+        raise ValueError(f"{SIGNATURES_FILE.name}: unknown argument type {text!r}")
+    readonly, dtype, ndim = match.groups()
+    return types.Array(parse_type(dtype), int(ndim), "C", readonly=bool(readonly))
+
+
+def type_text(numba_type: object) -> str:
+    """Return the text :func:`parse_type` reads back as ``numba_type``.
+
+    Examples
+    --------
+    >>> import numpy as np, numba
+    >>> type_text(numba.typeof(np.zeros((2, 2), dtype=bool)))
+    'array(bool, 2)'
+    """
+    text = str(numba_type)
+    if text in _SCALARS:
+        return text
+    if getattr(numba_type, "layout", None) != "C" or not numba_type.aligned:
+        raise ValueError(f"no text for {numba_type!r}: only C-contiguous aligned arrays")
+    readonly = "" if numba_type.mutable else "readonly "
+    return f"{readonly}array({numba_type.dtype}, {numba_type.ndim})"
+
+
+def load_kernels(path: Path = SIGNATURES_FILE) -> list[Kernel]:
+    """Return the kernels recorded in ``path`` (empty if the file is missing).
+
+    Examples
+    --------
+    >>> any(kernel.function.endswith("._merge_all") for kernel in load_kernels())
+    True
+    """
+    if not path.exists():
+        return []
+    table = tomllib.loads(path.read_text())
+    return [Kernel(row["function"], tuple(row["arguments"]), float(row["seconds"]))
+            for row in table.get("kernel", [])]
+
+
+def shares(kernels: Sequence[Kernel], count: int, head_start: float = 0.0) -> list[list[Kernel]]:
+    """Split ``kernels`` into ``count`` shares of about equal compile time.
+
+    The kernels of one module stay together (they call the same helpers, which every
+    process that needs them compiles again); modules go longest first to the share with
+    the least so far (ties to the lower share). Share 0 is this process's; the others
+    start ``head_start`` seconds behind it (a worker's start-up).
+
+    Examples
+    --------
+    >>> [[k.function for k in share] for share in shares(
+    ...     [Kernel("m.a", (), 4.0), Kernel("n.b", (), 3.0), Kernel("n.c", (), 2.0)], 2, 1.0)]
+    [['n.b', 'n.c'], ['m.a']]
+    """
+    modules: dict[str, list[Kernel]] = {}
+    for kernel in kernels:
+        modules.setdefault(kernel.module, []).append(kernel)
+    loads = [0.0] + [head_start] * (count - 1)
+    split: list[list[Kernel]] = [[] for _ in range(count)]
+    for name in sorted(modules, key=lambda name: (-sum(k.seconds for k in modules[name]), name)):
+        least = loads.index(min(loads))
+        split[least] += modules[name]
+        loads[least] += sum(kernel.seconds for kernel in modules[name])
+    return split
+
+
+def _dispatcher(kernel: Kernel) -> object:
+    module = importlib.import_module(kernel.module)
+    return getattr(module, kernel.function.rpartition(".")[2])
+
+
+def _index_prefix(dispatcher: object) -> str:
+    # numba names a function's cache files after its source file and qualified name.
+    stem = Path(dispatcher.py_func.__code__.co_filename).stem
+    return f"{stem}.{dispatcher.py_func.__qualname__}-"
+
+
+def is_cold(kernels: Iterable[Kernel]) -> bool:
+    """Return whether none of ``kernels`` has a file in numba's cache (a first run).
+
+    Examples
+    --------
+    >>> is_cold([])
+    False
+    """
+    found = False
+    listed: dict[str, list[str]] = {}
+    for kernel in kernels:
+        dispatcher = _dispatcher(kernel)
+        folder = dispatcher.stats.cache_path
+        if folder not in listed:
+            listed[folder] = os.listdir(folder) if os.path.isdir(folder) else []
+        prefix = _index_prefix(dispatcher)
+        if any(name.startswith(prefix) and name.endswith(".nbi") for name in listed[folder]):
+            return False
+        found = True
+    return found
+
+
+def _link_new(source: Path, target: Path) -> bool:
+    """Put a copy of ``source`` at ``target`` unless a file is there; return whether it did."""
+    staged = target.with_name(f"{target.name}.{os.getpid()}.staged")
+    shutil.copyfile(source, staged)
+    try:
+        os.link(staged, target)  # atomic, and fails rather than replace a file
+    except FileExistsError:
+        return False
+    finally:
+        staged.unlink()
+    return True
+
+
+def publish(private: Path, public: Path) -> int:
+    """Add a worker's cache files of one source directory to numba's; return functions added.
+
+    A function is added only where numba's cache has none of its files: its data files
+    first, then its index, each linked in under its name only while that name is free,
+    so no file of another process is ever replaced and an index published here names only
+    data published with it. Anything else stays for numba to compile lazily.
+
+    Examples
+    --------
+    >>> with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:
+    ...     for name in ("f-1.py311.nbi", "f-1.py311.1.nbc", "g-9.py311.nbi"):
+    ...         _ = (Path(a) / name).write_text("worker")
+    ...     _ = (Path(b) / "g-9.py311.nbi").write_text("numba")
+    ...     added = publish(Path(a), Path(b))
+    ...     names = sorted(path.name for path in Path(b).iterdir())
+    ...     added, names, (Path(b) / "g-9.py311.nbi").read_text()
+    (1, ['f-1.py311.1.nbc', 'f-1.py311.nbi', 'g-9.py311.nbi'], 'numba')
+    """
+    public.mkdir(parents=True, exist_ok=True)
+    existing = {path.name for path in public.iterdir()}
+    added = 0
+    for index in sorted(private.glob("*.nbi")):
+        base = index.name.removesuffix(".nbi")
+        data = sorted(path for path in private.iterdir()
+                      if path.name.startswith(base + ".") and path.name.endswith(".nbc"))
+        if any(name.startswith(base + ".") for name in existing):
+            continue
+        if all(_link_new(path, public / path.name) for path in data) and _link_new(
+            index, public / index.name
+        ):
+            added += 1
+    return added
+
+
+def _compile(kernels: Iterable[Kernel]) -> None:
+    for kernel in kernels:
+        # Any failure (a kernel renamed or retyped since the file was recorded) leaves
+        # that kernel to lazy compilation, where a real error shows itself.
+        with contextlib.suppress(Exception):
+            _dispatcher(kernel).compile(tuple(parse_type(text) for text in kernel.arguments))
+
+
+def _worker(share: int, count: int, folders: dict[str, str]) -> None:
+    """Compile share ``share`` of ``count`` into this process's numba cache, then publish it.
+
+    This process's cache is private to it; ``folders`` maps each kernel module to its
+    directory in numba's cache.
+    """
+    kernels = shares(load_kernels(), count, WORKER_START_S)[share]
+    _compile(kernels)
+    done: set[tuple[str, str]] = set()
+    for kernel in load_kernels():
+        private = _dispatcher(kernel).stats.cache_path
+        pair = (private, folders[kernel.module])
+        if pair not in done and os.path.isdir(private):
+            done.add(pair)
+            publish(Path(private), Path(pair[1]))
+
+
+def warm_kernel_cache(workers: int | None = None) -> bool:
+    """Compile a cold kernel cache in parallel (see the module docstring); return whether.
+
+    Does nothing (``False``) when the cache has any of the recorded kernels already,
+    with fewer than two CPUs, or with ``SEMISTATIC_PARALLEL_COMPILE=0``. ``workers``:
+    how many worker processes (default ``os.cpu_count() - 1``).
+
+    Examples
+    --------
+    >>> warm_kernel_cache(workers=0)  # no worker: nothing to share the compilation with
+    False
+    """
+    count = (os.cpu_count() or 1) if workers is None else workers + 1
+    kernels = load_kernels()
+    if os.environ.get(SWITCH, "1") == "0" or count < 2 or not kernels:
+        return False
+    try:
+        if not is_cold(kernels):
+            return False
+        folders = {kernel.module: _dispatcher(kernel).stats.cache_path for kernel in kernels}
+    except (OSError, ImportError, AttributeError):
+        return False  # a cache numba cannot locate, or a kernel renamed: compile lazily
+    with tempfile.TemporaryDirectory(prefix="semistatic-kernels-") as scratch:
+        started = []
+        for share in range(1, count):
+            private = Path(scratch) / str(share)
+            with contextlib.suppress(OSError):
+                started.append(subprocess.Popen(
+                    [sys.executable, "-m", "scenarios.kernel_cache", str(share), str(count),
+                     json.dumps(folders)],
+                    env={**os.environ, "NUMBA_CACHE_DIR": str(private)},
+                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                ))
+        try:
+            _compile(shares(kernels, count, WORKER_START_S)[0])
+        except BaseException:
+            # Interrupted (Ctrl-C reaches a worker only from a terminal): stop the workers
+            # now rather than wait for them. A worker stopped while publishing leaves no
+            # file half-written (each is linked in whole).
+            for process in started:
+                process.kill()
+            raise
+        finally:
+            for process in started:
+                try:
+                    process.wait(timeout=WORKER_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+    return True
+
+
+if __name__ == "__main__":
+    _worker(int(sys.argv[1]), int(sys.argv[2]), json.loads(sys.argv[3]))

@@ -1,0 +1,164 @@
+"""The parallel compilation of a cold kernel cache (scenarios/kernel_cache.py)."""
+
+from __future__ import annotations
+
+import itertools
+import subprocess
+from pathlib import Path
+
+import numba
+import pytest
+
+from scenarios import kernel_cache
+from scenarios.kernel_cache import Kernel, load_kernels, parse_type, publish, shares, type_text
+
+
+def test_every_recorded_kernel_is_a_compiled_function_with_parsable_arguments():
+    kernels = load_kernels()
+    assert kernels
+    for kernel in kernels:
+        dispatcher = kernel_cache._dispatcher(kernel)
+        assert isinstance(dispatcher, numba.core.registry.CPUDispatcher), kernel.function
+        assert dispatcher.py_func.__qualname__ == kernel.function.rpartition(".")[2]
+        for text in kernel.arguments:
+            assert type_text(parse_type(text)) == text
+    # One signature per function: two processes never save two signatures of one function.
+    assert len({kernel.function for kernel in kernels}) == len(kernels)
+
+
+def test_types_parse_to_what_numba_infers_from_arguments():
+    import numpy as np
+
+    frozen = np.zeros(3)
+    frozen.flags.writeable = False
+    assert parse_type("readonly array(float64, 1)") == numba.typeof(frozen)
+    assert parse_type("array(int64, 2)") == numba.typeof(np.zeros((2, 2), dtype=np.int64))
+    assert parse_type("bool") == numba.typeof(True)
+    with pytest.raises(ValueError, match="unknown argument type"):
+        parse_type("array(float32, 1)")
+    with pytest.raises(ValueError, match="C-contiguous"):
+        type_text(numba.typeof(np.zeros((3, 3))[:, 0]))
+
+
+def test_shares_split_like_the_best_of_all_splits_within_the_largest_kernel():
+    kernels = [Kernel(f"m{n}.kernel", (), seconds)
+               for n, seconds in enumerate([5.0, 3.5, 3.0, 2.0, 1.0, 0.5, 0.5])]
+    split = shares(kernels, 2)
+    assert sorted(k.function for share in split for k in share) == sorted(
+        k.function for k in kernels)
+    longest = max(sum(k.seconds for k in share) for share in split)
+    best = min(
+        max(sum(k.seconds for k, side in zip(kernels, sides, strict=True) if side == s)
+            for s in (0, 1))
+        for sides in itertools.product((0, 1), repeat=len(kernels))
+    )
+    assert best <= longest <= best + max(k.seconds for k in kernels)
+    assert shares(kernels, 2) == split  # deterministic
+
+
+def _files(folder: Path, names: dict[str, str]) -> None:
+    for name, text in names.items():
+        (folder / name).write_text(text)
+
+
+def test_publish_adds_only_functions_that_numba_has_no_file_of(tmp_path):
+    worker, cache = tmp_path / "worker", tmp_path / "cache"
+    worker.mkdir()
+    cache.mkdir()
+    _files(worker, {
+        "merge._a-10.py311.nbi": "index a", "merge._a-10.py311.1.nbc": "code a",
+        "merge._b-20.py311.nbi": "index b", "merge._b-20.py311.1.nbc": "code b",
+        "merge._c-30.py311.nbi": "index c", "merge._c-30.py311.1.nbc": "code c",
+        "merge._c-30.py311.2.nbc": "code c2",
+    })
+    # numba wrote b's index already, and c's second data file (its own signature).
+    _files(cache, {"merge._b-20.py311.nbi": "numba index b",
+                   "merge._c-30.py311.2.nbc": "numba code c"})
+    assert publish(worker, cache) == 1
+    found = {path.name: path.read_text() for path in cache.iterdir()}
+    assert found == {
+        "merge._a-10.py311.nbi": "index a", "merge._a-10.py311.1.nbc": "code a",
+        "merge._b-20.py311.nbi": "numba index b", "merge._c-30.py311.2.nbc": "numba code c",
+    }
+    assert publish(worker, cache) == 0  # a second worker: everything is there
+
+
+def test_publish_never_leaves_an_index_without_its_data(tmp_path, monkeypatch):
+    worker, cache = tmp_path / "worker", tmp_path / "cache"
+    worker.mkdir()
+    _files(worker, {"f-1.py311.nbi": "index", "f-1.py311.1.nbc": "code"})
+    real_link = kernel_cache.os.link
+
+    def racing_link(source, target):  # another process saves the data file first
+        if Path(target).name.endswith(".nbc"):
+            Path(target).write_text("theirs")
+        real_link(source, target)
+
+    monkeypatch.setattr(kernel_cache.os, "link", racing_link)
+    assert publish(worker, cache) == 0
+    assert {path.name: path.read_text() for path in cache.iterdir()} == {
+        "f-1.py311.1.nbc": "theirs"}
+
+
+def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
+    def no_process(*args, **kwargs):
+        raise AssertionError("no worker may start")
+
+    monkeypatch.setattr(subprocess, "Popen", no_process)
+    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "_compile", no_process)
+    monkeypatch.setenv(kernel_cache.SWITCH, "0")
+    assert kernel_cache.warm_kernel_cache(workers=1) is False
+    monkeypatch.setenv(kernel_cache.SWITCH, "1")
+    monkeypatch.setattr(kernel_cache.os, "cpu_count", lambda: 1)
+    assert kernel_cache.warm_kernel_cache() is False
+
+
+def test_an_interruption_stops_the_workers_at_once(monkeypatch):
+    class Worker:
+        killed = waited = False
+
+        def __init__(self, *args, **kwargs):
+            workers.append(self)
+
+        def kill(self):
+            self.killed = True
+
+        def wait(self, timeout=None):
+            self.waited = True
+
+    def interrupted(kernels):
+        raise KeyboardInterrupt
+
+    workers: list[Worker] = []
+    monkeypatch.setenv(kernel_cache.SWITCH, "1")
+    monkeypatch.setattr(subprocess, "Popen", Worker)
+    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "_compile", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        kernel_cache.warm_kernel_cache(workers=2)
+    assert len(workers) == 2
+    assert all(worker.killed and worker.waited for worker in workers)
+
+
+def test_a_kernel_that_cannot_be_compiled_is_left_to_lazy_compilation():
+    kernel_cache._compile([
+        Kernel("semistatic.frames.no_such_kernel", ("float64",), 0.1),
+        Kernel("semistatic.frames.wrap_angle_compiled", ("complex128",), 0.1),
+    ])
+
+
+@numba.njit(cache=True)
+def _never_called(x):  # pragma: no cover - compiled, never called
+    return x
+
+
+def test_cold_means_no_kernel_has_a_cache_index():
+    from semistatic.frames import wrap_angle_compiled
+
+    wrap_angle_compiled(0.0)  # compiled and saved, or loaded: its index exists
+    warm = Kernel("semistatic.frames.wrap_angle_compiled", ("float64",), 0.05)
+    cold = Kernel(f"{__name__}._never_called", ("float64",), 0.05)
+    assert kernel_cache.is_cold([cold]) is True
+    assert kernel_cache.is_cold([cold, warm]) is False
+    assert kernel_cache.is_cold([]) is False
