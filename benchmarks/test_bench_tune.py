@@ -18,7 +18,7 @@
   seeds, one trial at a time (so every seed's search is repeatable). Goal: TPE at
   least as good as the grid's best within 12 evaluations. The best-so-far curves are
   printed, and drawn into ``$SEMISTATIC_BENCH_FIGURES/tune_tpe_vs_grid.png`` when that
-  variable names a folder (the README's figure: ``docs/figures``).
+  variable names a folder (the README's figure: ``docs/tune``).
 
 Machine load changes every figure: ``uptime`` is printed beside them.
 
