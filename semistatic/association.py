@@ -56,7 +56,7 @@ from numpy.typing import ArrayLike
 from semistatic.frames import wrap_angle_compiled
 from semistatic.hausdorff import pairwise_restricted_hausdorff
 from semistatic.polyline import Polyline, as_polyline, pack_vertices
-from semistatic.similarity import integral_compiled, similarity, tangent_compiled
+from semistatic.similarity import similarity, tangent_compiled, tangent_similarity_compiled
 
 __all__ = [
     "FAR_COST",
@@ -618,12 +618,9 @@ def _similarity_costs(
                 continue
             map_line = map_points[map_bounds[b] : map_bounds[b + 1]]
             breaks1, angles1, length1 = tangent_compiled(map_line)
-            if length0 == 0.0 or length1 == 0.0:
-                continue
-            value = integral_compiled(breaks0, angles0, breaks1, angles1) * max(
-                length1 / length0, length0 / length1
-            )
-            if value < FAR_COST:
+            value = tangent_similarity_compiled(breaks0, angles0, length0, breaks1, angles1,
+                                                length1)
+            if value < FAR_COST:  # (inf, no shape, stays FAR_COST)
                 costs[a, b] = value
     return costs
 

@@ -666,16 +666,16 @@ class PolylineMap:
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
             trusted=True,  # the map's own polylines and weights, the scan's own parts
         )
-        store, new = self._entries, object.__new__
         for entry, (line, support) in zip(entries, merged, strict=True):
-            # _replaced, field by field (once per merged polyline, twenty in a busy scan).
-            confirmed = new(MapPolyline)
-            fields = confirmed.__dict__
-            fields.update(entry.__dict__)
-            fields["polyline"], fields["support"] = line, support if support.size else None
-            fields["status"], fields["hits"], fields["misses"] = "confirmed", entry.hits + 1, 0
-            fields["last_seen"] = stamp
-            store[entry.id] = confirmed
+            self._entries[entry.id] = _replaced(
+                entry,
+                polyline=line,
+                support=support if support.size else None,
+                status="confirmed",
+                hits=entry.hits + 1,
+                misses=0,
+                last_seen=stamp,
+            )
         return set(by_map)
 
     def _weights_along(self, line: Polyline, parts: list[MapPolyline]) -> np.ndarray | None:
