@@ -98,13 +98,15 @@ def _distinct(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
 
     Each vertex is compared with the one before it in the input.
     """
-    return points[_distinct_mask(points)]
+    return _kept_rows(points, _distinct_mask(points))
 
 
 @numba.njit(cache=True)
 def _distinct_mask(points: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
     """Return which of ``points`` :func:`_distinct` keeps."""
-    keep = np.ones(points.shape[0], dtype=np.bool_)
+    keep = np.empty(points.shape[0], np.bool_)
+    if keep.size:
+        keep[0] = True
     for k in range(1, points.shape[0]):
         dx, dy = points[k, 0] - points[k - 1, 0], points[k, 1] - points[k - 1, 1]
         keep[k] = dx * dx + dy * dy > DUPLICATE_DISTANCE**2
@@ -247,6 +249,31 @@ def _run_length(flags: np.ndarray) -> int:  # pragma: no cover - compiled
     while count < flags.size and flags[count]:
         count += 1
     return count
+
+
+@numba.njit(cache=True)
+def _trailing_run_length(flags: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Return the length of the trailing run of true values."""
+    count = 0
+    while count < flags.size and flags[flags.size - 1 - count]:
+        count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def _reverse(values: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Reverse a 1-d array in place."""
+    for k in range(values.size // 2):
+        values[k], values[values.size - 1 - k] = values[values.size - 1 - k], values[k]
+
+
+@numba.njit(cache=True)
+def _reverse_rows(points: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Reverse the rows of an ``(N, 2)`` array in place."""
+    last = points.shape[0] - 1
+    for k in range(points.shape[0] // 2):
+        for axis in range(2):
+            points[k, axis], points[last - k, axis] = points[last - k, axis], points[k, axis]
 
 
 def merge(
@@ -604,10 +631,15 @@ def _merge_all(
                         + (new[-1, 1] - new[0, 1]) * (old[-1, 1] - old[0, 1])
                         < 0.0
                     ):
-                        new, new_weights = new[::-1].copy(), new_weights[::-1].copy()
-                        arcs, feet = arcs[::-1].copy(), feet[::-1].copy()
-                        distances = distances[::-1].copy()
-                        before, after = before[::-1].copy(), after[::-1].copy()
+                        # In place (all are this merge's own): copies of reversed views
+                        # would compile numpy's strided copy per array type.
+                        _reverse_rows(new)
+                        _reverse_rows(feet)
+                        _reverse(new_weights)
+                        _reverse(arcs)
+                        _reverse(distances)
+                        _reverse(before)
+                        _reverse(after)
                     if not cut:
                         break
                     cut = False
@@ -651,7 +683,7 @@ def _merge_all(
                 # End: the same, mirrored.
                 reach = distances[-1] if after[-1] else arcs[-1] - map_arcs[-1]
                 if reach > tolerance:
-                    append = _run_length(after[::-1].copy())
+                    append = _trailing_run_length(after)
                 elif reach >= -tolerance:
                     alpha = _share(new_weights[-1], end_weight)
                     moved[-1, 0] = old[-1, 0] + alpha * (new[-1, 0] - old[-1, 0])
@@ -712,12 +744,13 @@ def _merge_all(
                     if distances[v] > tolerance:
                         _put_rows(new, v, v + 1, candidates, size)
                         size += 1
-                keep = np.ones(size, np.bool_)
+                keep = np.empty(size, np.bool_)
+                keep[0] = True
                 for v in range(1, size):
                     gap = math.hypot(candidates[v, 0] - candidates[v - 1, 0],
                                      candidates[v, 1] - candidates[v - 1, 1])
                     keep[v] = gap > DUPLICATE_DISTANCE
-                candidates = candidates[:size][keep]
+                candidates = _kept_rows(candidates, keep)
                 along = _edges_along(candidates, old, tolerance)
                 totals = _weights_of(along, old_totals)
                 totals += _weights_of(_edges_along(candidates, new, tolerance), new_weights)
@@ -727,7 +760,7 @@ def _merge_all(
             kept = douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)
             line_weights = _kept_weights(line, line_weights, kept)
             line_totals = _kept_weights(line, line_totals, kept)
-            line = line[kept]
+            line = _rows_at(line, kept)
             changed[k] = True
         if stored + line.shape[0] > merged.shape[0]:
             grown = np.empty((2 * (stored + line.shape[0]), 2))
@@ -872,7 +905,7 @@ def _cut_corner(
     intersection is returned. A corner's first views can cut it like that: one face seen
     at grazing incidence from afar, with a reading or two on it.
     """
-    edge = np.searchsorted(map_arcs, arc, side="right") - 1
+    edge = _last_at_most(map_arcs, arc)
     if not 1 <= edge <= vertices.shape[0] - 3:
         return False, 0.0, 0.0
     ax, ay = vertices[edge - 1, 0], vertices[edge - 1, 1]
@@ -899,8 +932,24 @@ def _share(scan_weight: float, map_weight: float) -> float:  # pragma: no cover 
 @numba.njit(cache=True)
 def _edge_at(starts: np.ndarray, arc: float) -> int:  # pragma: no cover - compiled
     """Return the edge at arc length ``arc`` of a polyline with vertex arcs ``starts``."""
-    edge = np.searchsorted(starts, arc, side="right") - 1
-    return min(max(edge, 0), starts.size - 2)
+    return min(max(_last_at_most(starts, arc), 0), starts.size - 2)
+
+
+@numba.njit(cache=True)
+def _last_at_most(starts: np.ndarray, arc: float) -> int:  # pragma: no cover - compiled
+    """Return ``np.searchsorted(starts, arc, side="right") - 1`` for ascending ``starts``.
+
+    The same bisection as numpy's (a NaN ``arc`` sorts last), without compiling its
+    library implementation into every caller.
+    """
+    low, high = 0, starts.size
+    while low < high:
+        middle = (low + high) // 2
+        if arc < starts[middle]:
+            high = middle
+        else:
+            low = middle + 1
+    return low - 1
 
 
 @numba.njit(cache=True)
@@ -971,7 +1020,7 @@ def _distinct_with(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Return :func:`_distinct_weighted` of ``points`` with two weight arrays."""
     keep = _distinct_mask(points)
-    return points[keep], weights[keep[1:]], totals[keep[1:]]
+    return _kept_rows(points, keep), _kept_edges(weights, keep), _kept_edges(totals, keep)
 
 
 @numba.njit(cache=True)
@@ -981,5 +1030,46 @@ def _distinct_weighted(
     """Return :func:`_distinct` of ``points`` and the weights of the edges left."""
     keep = _distinct_mask(points)
     # A repeated vertex ends a zero-length edge: that edge goes with it.
-    return points[keep], weights[keep[1:]]
+    return _kept_rows(points, keep), _kept_edges(weights, keep)
+
+
+# Masks and index arrays applied by loops: numpy's boolean and fancy indexing each compile
+# a library implementation per array type, again in every kernel that calls the helper.
+@numba.njit(cache=True)
+def _kept_rows(points: np.ndarray, keep: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Return ``points[keep]`` for ``(N, 2)`` points and an ``(N,)`` boolean mask."""
+    size = 0
+    for k in range(keep.size):
+        size += keep[k]
+    kept = np.empty((size, 2))
+    row = 0
+    for k in range(keep.size):
+        if keep[k]:
+            kept[row, 0], kept[row, 1] = points[k, 0], points[k, 1]
+            row += 1
+    return kept
+
+
+@numba.njit(cache=True)
+def _kept_edges(weights: np.ndarray, keep: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Return ``weights[keep[1:]]``: the weights of the edges ending at kept vertices."""
+    size = 0
+    for k in range(1, keep.size):
+        size += keep[k]
+    kept = np.empty(size)
+    at = 0
+    for k in range(1, keep.size):
+        if keep[k]:
+            kept[at] = weights[k - 1]
+            at += 1
+    return kept
+
+
+@numba.njit(cache=True)
+def _rows_at(points: np.ndarray, indices: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Return ``points[indices]`` for ``(N, 2)`` points and ``(K,)`` in-range indices."""
+    rows = np.empty((indices.size, 2))
+    for k in range(indices.size):
+        rows[k, 0], rows[k, 1] = points[indices[k], 0], points[indices[k], 1]
+    return rows
 
