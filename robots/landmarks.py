@@ -274,7 +274,7 @@ def _post_groups(
     count = ranges.size
     max_jump = 2.0 * radius + 3.0 * range_sigma
     last_beam = count - 1
-    firsts, sizes = np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64)
+    firsts, sizes = np.empty(count, np.int64), np.empty(count, np.int64)
     distance, first_angle, last_angle = np.empty(count), np.empty(count), np.empty(count)
     low_miss, high_miss = np.empty(count), np.empty(count)
     accepted = 0

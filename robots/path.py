@@ -557,10 +557,10 @@ def _project_points(
     rows = points * basins
     t, low, high = np.empty(rows), np.empty(rows), np.empty(rows)
     position_x, position_y = np.empty(rows), np.empty(rows)
-    active = np.empty(rows, dtype=np.bool_)
+    active = np.empty(rows, np.bool_)
     distance, key = np.empty(count), np.empty(count)
-    picked = np.zeros(count, dtype=np.bool_)
-    ranked = np.empty(basins, dtype=np.int64)
+    picked = np.zeros(count, np.bool_)
+    ranked = np.empty(basins, np.int64)
     for p in range(points):
         x, y = xs[p], ys[p]
         for k in range(count):

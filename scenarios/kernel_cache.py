@@ -9,6 +9,11 @@ cache without replacing any file there (:func:`publish`). The run that follows l
 those kernels from the cache. The machine code is the same whichever process compiles
 it: results do not change.
 
+Workers are forked: a fork starts in milliseconds with numba set up and the kernels'
+modules imported, where a fresh interpreter would spend ~1.5 s of the wait importing
+them. Where no worker can be forked (see :func:`_may_fork`), the kernels compile lazily,
+one after the other.
+
 Why private directories: numba writes each cache file to a temporary name and renames it
 (atomic), but a function's index (signature -> data file) is read, extended and written
 back, so two processes saving *different* signatures of one function at the same time can
@@ -34,17 +39,19 @@ from __future__ import annotations
 
 import contextlib
 import importlib
-import json
+import multiprocessing
 import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
+import threading
 import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from semistatic.frames import wrap_angle_compiled
 
 __all__ = [
     "SIGNATURES_FILE",
@@ -65,12 +72,12 @@ SIGNATURES_FILE = Path(__file__).with_name("kernel_signatures.toml")
 SWITCH = "SEMISTATIC_PARALLEL_COMPILE"
 """Environment variable: ``0`` compiles lazily in the run, one kernel after the other."""
 
-WORKER_TIMEOUT_S = 600.0
+WORKER_TIMEOUT_S = 120.0
 """A worker still compiling after this long is stopped (its kernels compile lazily)."""
 
-WORKER_START_S = 1.5
-"""What starting a worker costs before it compiles (interpreter, imports): its share is
-that much smaller."""
+WORKER_START_S = 0.4
+"""What a worker's share costs the run beyond compiling it (forking, publishing, loading
+its kernels back from the cache): its share is that much smaller (measured, 2 cores)."""
 
 _SCALARS = ("bool", "float64", "int64")
 _ARRAY = re.compile(r"(readonly )?array\((bool|float64|int64), ([1-9])\)")
@@ -263,21 +270,65 @@ def _compile(kernels: Iterable[Kernel]) -> None:
             _dispatcher(kernel).compile(tuple(parse_type(text) for text in kernel.arguments))
 
 
-def _worker(share: int, count: int, folders: dict[str, str]) -> None:
-    """Compile share ``share`` of ``count`` into this process's numba cache, then publish it.
+def _redirect_caches(folder: str) -> None:
+    """Make every compiled function loaded in this process cache into ``folder`` from now on.
 
-    This process's cache is private to it; ``folders`` maps each kernel module to its
-    directory in numba's cache.
+    numba picks a function's cache directory when the function is defined (from
+    ``numba.config.CACHE_DIR``); a forked worker inherits the parent's choice, numba's
+    own cache, which it must not write to.
     """
-    kernels = shares(load_kernels(), count, WORKER_START_S)[share]
-    _compile(kernels)
-    done: set[tuple[str, str]] = set()
-    for kernel in load_kernels():
-        private = _dispatcher(kernel).stats.cache_path
-        pair = (private, folders[kernel.module])
-        if pair not in done and os.path.isdir(private):
-            done.add(pair)
-            publish(Path(private), Path(pair[1]))
+    import numba
+    from numba.core.caching import FunctionCache
+    from numba.core.dispatcher import Dispatcher
+
+    numba.config.CACHE_DIR = folder
+    for module in list(sys.modules.values()):
+        for value in list(vars(module).values()):
+            if isinstance(value, Dispatcher) and isinstance(value._cache, FunctionCache):
+                value.enable_caching()
+
+
+def _worker(share: int, count: int, folders: dict[str, str], private: str) -> None:
+    """Compile share ``share`` of ``count`` into ``private``, then publish it.
+
+    Runs in a forked worker. ``folders`` maps each kernel module to its directory in
+    numba's cache. Any failure leaves the share's kernels to lazy compilation.
+    """
+    try:
+        _redirect_caches(private)
+        kernels = load_kernels()
+        _compile(shares(kernels, count, WORKER_START_S)[share])
+        done: set[tuple[str, str]] = set()
+        for kernel in kernels:
+            folder = _dispatcher(kernel).stats.cache_path
+            pair = (folder, folders[kernel.module])
+            if pair not in done and os.path.isdir(folder):
+                done.add(pair)
+                publish(Path(folder), Path(pair[1]))
+    except BaseException:
+        # Quietly (no traceback from the fork): the run compiles what is missing itself.
+        os._exit(1)
+
+
+def _may_fork() -> bool:
+    """Return whether this process may fork compile workers.
+
+    Not where the platform cannot fork, not in a daemonic process (a pool's worker may
+    have no children; its pool already uses the other cores) and not beside other Python
+    threads (a lock one of them holds at the fork would stay held in the worker).
+    """
+    return ("fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon
+            and threading.active_count() == 1)
+
+
+def _start_worker(share: int, count: int, folders: dict[str, str],
+                  private: Path) -> multiprocessing.Process:
+    """Fork a process that runs :func:`_worker` for ``share``."""
+    process = multiprocessing.get_context("fork").Process(
+        target=_worker, args=(share, count, folders, str(private)), daemon=True)
+    process.start()
+    return process
 
 
 def warm_kernel_cache(workers: int | None = None) -> bool:
@@ -294,7 +345,8 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
     """
     count = (os.cpu_count() or 1) if workers is None else workers + 1
     kernels = load_kernels()
-    if os.environ.get(SWITCH, "1") == "0" or count < 2 or not kernels:
+    if (os.environ.get(SWITCH, "1") == "0" or count < 2 or not kernels
+            or not _may_fork()):
         return False
     try:
         if not is_cold(kernels):
@@ -302,18 +354,14 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
         folders = {kernel.module: _dispatcher(kernel).stats.cache_path for kernel in kernels}
     except (OSError, ImportError, AttributeError):
         return False  # a cache numba cannot locate, or a kernel renamed: compile lazily
+    # numba sets up its compiler on a process's first compilation (~0.25 s): once here,
+    # before the fork, and the workers inherit it.
+    wrap_angle_compiled(0.0)
     with tempfile.TemporaryDirectory(prefix="semistatic-kernels-") as scratch:
         started = []
         for share in range(1, count):
-            private = Path(scratch) / str(share)
             with contextlib.suppress(OSError):
-                started.append(subprocess.Popen(
-                    [sys.executable, "-m", "scenarios.kernel_cache", str(share), str(count),
-                     json.dumps(folders)],
-                    env={**os.environ, "NUMBA_CACHE_DIR": str(private)},
-                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                ))
+                started.append(_start_worker(share, count, folders, Path(scratch) / str(share)))
         try:
             _compile(shares(kernels, count, WORKER_START_S)[0])
         except BaseException:
@@ -325,13 +373,8 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
             raise
         finally:
             for process in started:
-                try:
-                    process.wait(timeout=WORKER_TIMEOUT_S)
-                except subprocess.TimeoutExpired:
+                process.join(timeout=WORKER_TIMEOUT_S)
+                if process.is_alive():
                     process.kill()
-                    process.wait()
+                    process.join()
     return True
-
-
-if __name__ == "__main__":
-    _worker(int(sys.argv[1]), int(sys.argv[2]), json.loads(sys.argv[3]))

@@ -384,7 +384,7 @@ def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: floa
     >>> douglas_peucker_compiled(points, np.array([3]), 0.05)  # two lines, 0-3 and 4
     array([0, 2, 3, 4])
     """
-    keep = np.zeros(points.shape[0], dtype=np.bool_)
+    keep = np.zeros(points.shape[0], np.bool_)
     sections = np.empty((points.shape[0] if points.shape[0] > 1 else 1, 2), np.int64)
     first = np.int64(0)  # not a constant: a literal 0 would compile a kernel of its own
     for line in range(ends.size + 1 if points.shape[0] else 0):

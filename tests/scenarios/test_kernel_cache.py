@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import itertools
-import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import numba
 import pytest
@@ -104,7 +104,7 @@ def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
     def no_process(*args, **kwargs):
         raise AssertionError("no worker may start")
 
-    monkeypatch.setattr(subprocess, "Popen", no_process)
+    monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
     monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
     monkeypatch.setattr(kernel_cache, "_compile", no_process)
     monkeypatch.setenv(kernel_cache.SWITCH, "0")
@@ -116,7 +116,7 @@ def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
 
 def test_an_interruption_stops_the_workers_at_once(monkeypatch):
     class Worker:
-        killed = waited = False
+        killed = joined = False
 
         def __init__(self, *args, **kwargs):
             workers.append(self)
@@ -124,21 +124,24 @@ def test_an_interruption_stops_the_workers_at_once(monkeypatch):
         def kill(self):
             self.killed = True
 
-        def wait(self, timeout=None):
-            self.waited = True
+        def join(self, timeout=None):
+            self.joined = True
+
+        def is_alive(self):
+            return not self.killed
 
     def interrupted(kernels):
         raise KeyboardInterrupt
 
     workers: list[Worker] = []
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
-    monkeypatch.setattr(subprocess, "Popen", Worker)
+    monkeypatch.setattr(kernel_cache, "_start_worker", Worker)
     monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
     monkeypatch.setattr(kernel_cache, "_compile", interrupted)
     with pytest.raises(KeyboardInterrupt):
         kernel_cache.warm_kernel_cache(workers=2)
     assert len(workers) == 2
-    assert all(worker.killed and worker.waited for worker in workers)
+    assert all(worker.killed and worker.joined for worker in workers)
 
 
 def test_a_kernel_that_cannot_be_compiled_is_left_to_lazy_compilation():
@@ -162,3 +165,53 @@ def test_cold_means_no_kernel_has_a_cache_index():
     assert kernel_cache.is_cold([cold]) is True
     assert kernel_cache.is_cold([cold, warm]) is False
     assert kernel_cache.is_cold([]) is False
+
+
+def test_no_worker_is_forked_beside_other_threads_or_in_a_daemonic_process(monkeypatch):
+    def no_process(*args, **kwargs):
+        raise AssertionError("no worker may start")
+
+    monkeypatch.setenv(kernel_cache.SWITCH, "1")
+    monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
+    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "_compile", no_process)
+    monkeypatch.setattr(kernel_cache.threading, "active_count", lambda: 2)
+    assert kernel_cache.warm_kernel_cache(workers=1) is False
+    monkeypatch.setattr(kernel_cache.threading, "active_count", lambda: 1)
+    monkeypatch.setattr(kernel_cache.multiprocessing, "current_process",
+                        lambda: SimpleNamespace(daemon=True))
+    assert kernel_cache.warm_kernel_cache(workers=1) is False
+
+
+# Two cheap kernels of two modules: one share each, this process's and a forked worker's.
+_FORK_SCRIPT = """
+import os, sys
+from scenarios import kernel_cache
+from scenarios.kernel_cache import Kernel
+
+kernels = [
+    Kernel("semistatic.polyline._run_boxes", ("array(float64, 2)", "array(int64, 1)"), 1.0),
+    Kernel("robots.ekf._stacked_pairs", ("array(float64, 2)", "array(float64, 3)",
+           "array(float64, 2)", "array(float64, 3)", "array(int64, 1)", "array(int64, 1)"), 1.0),
+]
+kernel_cache.load_kernels = lambda path=None: kernels
+print(kernel_cache.warm_kernel_cache(workers=1))
+print(kernel_cache.is_cold(kernels[:1]), kernel_cache.is_cold(kernels[1:]))
+print(sorted(len(kernel_cache._dispatcher(kernel).overloads) for kernel in kernels))
+"""
+
+
+def test_a_forked_worker_compiles_its_share_into_the_cache(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-c", _FORK_SCRIPT], capture_output=True, text=True, check=True,
+        env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), kernel_cache.SWITCH: "1"},
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    started, cold, overloads = result.stdout.split("\n")[:3]
+    assert started == "True"
+    assert cold == "False False"  # both kernels are in numba's cache now
+    assert overloads == "[0, 1]"  # one compiled here, the other only by the worker
