@@ -75,7 +75,7 @@ SWITCH = "SEMISTATIC_PARALLEL_COMPILE"
 WORKER_TIMEOUT_S = 120.0
 """A worker still compiling after this long is stopped (its kernels compile lazily)."""
 
-WORKER_START_S = 0.4
+WORKER_START_S = 0.1
 """What a worker's share costs the run beyond compiling it (forking, publishing, loading
 its kernels back from the cache): its share is that much smaller (measured, 2 cores)."""
 
