@@ -1,13 +1,16 @@
-"""Compile the numba kernels of a cold cache on every core before the first run (issue 13).
+"""Compile the numba kernels missing from the cache on every core before a run (issue 13).
 
 The kernels compile on first use and are cached on disk (``@njit(cache=True)``), so the
-first run after installation compiles them all, one after the other on one core. When
-that cache is cold, :func:`warm_kernel_cache` compiles them in parallel instead: this
-process compiles one share of the kernels, ``os.cpu_count() - 1`` worker processes the
-others, each worker into a private cache directory that it then publishes into numba's
-cache without replacing any file there (:func:`publish`). The run that follows loads
-those kernels from the cache. The machine code is the same whichever process compiles
-it: results do not change.
+first run after installation compiles them all, one after the other on one core, and so
+does the first run after an upgrade or an edit changed their source files (numba stamps
+its cache files with a hash of their source file). When kernels are missing from
+the cache, :func:`warm_kernel_cache` compiles them in parallel instead: this process
+compiles one share of them, ``os.cpu_count() - 1`` worker processes the others, each
+worker into a private cache directory that it then publishes into numba's cache without
+replacing any file there (:func:`publish`; obsolete files of a changed source file are
+deleted first, :func:`remove_obsolete`). The run that follows loads those kernels from
+the cache. The machine code is the same whichever process compiles it: results do not
+change.
 
 Workers are forked: a fork starts in milliseconds with numba set up and the kernels'
 modules imported, where a fresh interpreter would spend ~1.5 s of the wait importing
@@ -57,12 +60,13 @@ __all__ = [
     "SIGNATURES_FILE",
     "SWITCH",
     "Kernel",
-    "is_cold",
     "load_kernels",
     "parse_type",
     "publish",
+    "remove_obsolete",
     "shares",
     "type_text",
+    "uncached",
     "warm_kernel_cache",
 ]
 
@@ -186,32 +190,59 @@ def _dispatcher(kernel: Kernel) -> object:
     return getattr(module, kernel.function.rpartition(".")[2])
 
 
-def _index_prefix(dispatcher: object) -> str:
-    # numba names a function's cache files after its source file and qualified name.
-    stem = Path(dispatcher.py_func.__code__.co_filename).stem
-    return f"{stem}.{dispatcher.py_func.__qualname__}-"
+def _index_state(dispatcher: object) -> str:
+    """Return ``"current"``, ``"obsolete"`` or ``"missing"``: numba's cache index of a function.
+
+    numba's own reading of the index: an index written for another version of the
+    source file (or of numba) loads as empty, and numba compiles the function again.
+    A function numba does not cache reads ``"current"`` (nothing to compile ahead).
+    """
+    cache_file = getattr(dispatcher._cache, "_cache_file", None)
+    if cache_file is None or cache_file._load_index():
+        return "current"
+    return "obsolete" if os.path.exists(cache_file._index_path) else "missing"
 
 
-def is_cold(kernels: Iterable[Kernel]) -> bool:
-    """Return whether none of ``kernels`` has a file in numba's cache (a first run).
+def uncached(kernels: Iterable[Kernel]) -> list[Kernel]:
+    """Return the ``kernels`` numba's cache cannot load (a first run, or source changed since).
 
     Examples
     --------
-    >>> is_cold([])
-    False
+    >>> uncached([])
+    []
     """
-    found = False
-    listed: dict[str, list[str]] = {}
+    return [kernel for kernel in kernels if _index_state(_dispatcher(kernel)) != "current"]
+
+
+def remove_obsolete(kernels: Iterable[Kernel]) -> int:
+    """Delete numba's cache files of every source file with an obsolete kernel index.
+
+    numba stamps every cache file of a source file with a hash of that file, so when one
+    kernel's index is obsolete all of them are: numba would overwrite them on its next
+    save. Removed first, they leave the names free for :func:`publish`, which
+    never replaces a file. Returns how many files went.
+
+    Examples
+    --------
+    >>> remove_obsolete([])
+    0
+    """
+    removed = 0
+    done: set[tuple[str, str]] = set()
     for kernel in kernels:
         dispatcher = _dispatcher(kernel)
-        folder = dispatcher.stats.cache_path
-        if folder not in listed:
-            listed[folder] = os.listdir(folder) if os.path.isdir(folder) else []
-        prefix = _index_prefix(dispatcher)
-        if any(name.startswith(prefix) and name.endswith(".nbi") for name in listed[folder]):
-            return False
-        found = True
-    return found
+        source = (dispatcher.stats.cache_path,
+                  Path(dispatcher.py_func.__code__.co_filename).stem)
+        if source in done or _index_state(dispatcher) != "obsolete":
+            continue
+        done.add(source)
+        folder, stem = source
+        for path in Path(folder).glob(f"{stem}.*"):
+            if path.suffix in (".nbi", ".nbc"):
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
+                    removed += 1
+    return removed
 
 
 def _link_new(source: Path, target: Path) -> bool:
@@ -288,16 +319,15 @@ def _redirect_caches(folder: str) -> None:
                 value.enable_caching()
 
 
-def _worker(share: int, count: int, folders: dict[str, str], private: str) -> None:
-    """Compile share ``share`` of ``count`` into ``private``, then publish it.
+def _worker(kernels: list[Kernel], folders: dict[str, str], private: str) -> None:
+    """Compile ``kernels`` into the cache directory ``private``, then publish it.
 
     Runs in a forked worker. ``folders`` maps each kernel module to its directory in
-    numba's cache. Any failure leaves the share's kernels to lazy compilation.
+    numba's cache. Any failure leaves the kernels to lazy compilation.
     """
     try:
         _redirect_caches(private)
-        kernels = load_kernels()
-        _compile(shares(kernels, count, WORKER_START_S)[share])
+        _compile(kernels)
         done: set[tuple[str, str]] = set()
         for kernel in kernels:
             folder = _dispatcher(kernel).stats.cache_path
@@ -322,21 +352,21 @@ def _may_fork() -> bool:
             and threading.active_count() == 1)
 
 
-def _start_worker(share: int, count: int, folders: dict[str, str],
+def _start_worker(kernels: list[Kernel], folders: dict[str, str],
                   private: Path) -> multiprocessing.Process:
-    """Fork a process that runs :func:`_worker` for ``share``."""
+    """Fork a process that runs :func:`_worker` on ``kernels``."""
     process = multiprocessing.get_context("fork").Process(
-        target=_worker, args=(share, count, folders, str(private)), daemon=True)
+        target=_worker, args=(kernels, folders, str(private)), daemon=True)
     process.start()
     return process
 
 
 def warm_kernel_cache(workers: int | None = None) -> bool:
-    """Compile a cold kernel cache in parallel (see the module docstring); return whether.
+    """Compile the recorded kernels the cache cannot load, in parallel; return whether.
 
-    Does nothing (``False``) when the cache has any of the recorded kernels already,
-    with fewer than two CPUs, or with ``SEMISTATIC_PARALLEL_COMPILE=0``. ``workers``:
-    how many worker processes (default ``os.cpu_count() - 1``).
+    Does nothing (``False``) when the cache can load every recorded kernel, with fewer
+    than two CPUs, where no worker can be forked or with ``SEMISTATIC_PARALLEL_COMPILE=0``.
+    ``workers``: how many worker processes (default ``os.cpu_count() - 1``).
 
     Examples
     --------
@@ -349,9 +379,11 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
             or not _may_fork()):
         return False
     try:
-        if not is_cold(kernels):
+        kernels = uncached(kernels)
+        if not kernels:
             return False
         folders = {kernel.module: _dispatcher(kernel).stats.cache_path for kernel in kernels}
+        remove_obsolete(kernels)
     except (OSError, ImportError, AttributeError):
         return False  # a cache numba cannot locate, or a kernel renamed: compile lazily
     # numba sets up its compiler on a process's first compilation (~0.25 s): once here,
@@ -359,11 +391,14 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
     wrap_angle_compiled(0.0)
     with tempfile.TemporaryDirectory(prefix="semistatic-kernels-") as scratch:
         started = []
+        split = shares(kernels, count, WORKER_START_S)
         for share in range(1, count):
-            with contextlib.suppress(OSError):
-                started.append(_start_worker(share, count, folders, Path(scratch) / str(share)))
+            if split[share]:
+                with contextlib.suppress(OSError):
+                    started.append(_start_worker(split[share], folders,
+                                                 Path(scratch) / str(share)))
         try:
-            _compile(shares(kernels, count, WORKER_START_S)[0])
+            _compile(split[0])
         except BaseException:
             # Interrupted (Ctrl-C reaches a worker only from a terminal): stop the workers
             # now rather than wait for them. A worker stopped while publishing leaves no

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -105,7 +106,7 @@ def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
         raise AssertionError("no worker may start")
 
     monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
-    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "uncached", list)
     monkeypatch.setattr(kernel_cache, "_compile", no_process)
     monkeypatch.setenv(kernel_cache.SWITCH, "0")
     assert kernel_cache.warm_kernel_cache(workers=1) is False
@@ -136,7 +137,7 @@ def test_an_interruption_stops_the_workers_at_once(monkeypatch):
     workers: list[Worker] = []
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
     monkeypatch.setattr(kernel_cache, "_start_worker", Worker)
-    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "uncached", list)
     monkeypatch.setattr(kernel_cache, "_compile", interrupted)
     with pytest.raises(KeyboardInterrupt):
         kernel_cache.warm_kernel_cache(workers=2)
@@ -151,20 +152,50 @@ def test_a_kernel_that_cannot_be_compiled_is_left_to_lazy_compilation():
     ])
 
 
+_PROBE = """
+import numba
+
+
 @numba.njit(cache=True)
-def _never_called(x):  # pragma: no cover - compiled, never called
-    return x
+def twice(x):
+    return {factor} * x
 
 
-def test_cold_means_no_kernel_has_a_cache_index():
-    from semistatic.frames import wrap_angle_compiled
+@numba.njit(cache=True)
+def helper(x):
+    return x + 1.0
+"""
 
-    wrap_angle_compiled(0.0)  # compiled and saved, or loaded: its index exists
-    warm = Kernel("semistatic.frames.wrap_angle_compiled", ("float64",), 0.05)
-    cold = Kernel(f"{__name__}._never_called", ("float64",), 0.05)
-    assert kernel_cache.is_cold([cold]) is True
-    assert kernel_cache.is_cold([cold, warm]) is False
-    assert kernel_cache.is_cold([]) is False
+
+def test_a_kernel_is_uncached_until_compiled_and_again_once_its_source_changes(
+        tmp_path, monkeypatch):
+    import importlib
+    import os
+
+    source = tmp_path / "cache_probe_module.py"
+    source.write_text(_PROBE.format(factor="2.0"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    module = importlib.import_module("cache_probe_module")
+    folder = Path(module.twice.stats.cache_path)
+    try:
+        kernel = Kernel("cache_probe_module.twice", ("float64",), 0.1)
+        assert kernel_cache.uncached([kernel]) == [kernel]  # never compiled
+        assert module.twice(1.5) == 3.0  # compiled and saved
+        assert module.helper(1.0) == 2.0
+        assert kernel_cache.uncached([kernel]) == []
+        assert kernel_cache.remove_obsolete([kernel]) == 0  # current files stay
+        assert len(list(folder.glob("cache_probe_module.*.nb?"))) == 4  # index + data each
+        # An upgrade: the module's source changes, a new process loads the new version.
+        source.write_text(_PROBE.format(factor="3.0"))
+        stat = source.stat()  # a new time too: numba hashes a file again when it changes
+        os.utime(source, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+        module = importlib.reload(module)
+        assert kernel_cache.uncached([kernel]) == [kernel]
+        assert kernel_cache.remove_obsolete([kernel]) == 4  # the helper's files too
+        assert not list(folder.glob("cache_probe_module.*.nb?"))
+        assert module.twice(1.5) == 4.5
+    finally:
+        sys.modules.pop("cache_probe_module", None)
 
 
 def test_no_worker_is_forked_beside_other_threads_or_in_a_daemonic_process(monkeypatch):
@@ -173,7 +204,7 @@ def test_no_worker_is_forked_beside_other_threads_or_in_a_daemonic_process(monke
 
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
     monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
-    monkeypatch.setattr(kernel_cache, "is_cold", lambda kernels: True)
+    monkeypatch.setattr(kernel_cache, "uncached", list)
     monkeypatch.setattr(kernel_cache, "_compile", no_process)
     monkeypatch.setattr(kernel_cache.threading, "active_count", lambda: 2)
     assert kernel_cache.warm_kernel_cache(workers=1) is False
@@ -196,7 +227,7 @@ kernels = [
 ]
 kernel_cache.load_kernels = lambda path=None: kernels
 print(kernel_cache.warm_kernel_cache(workers=1))
-print(kernel_cache.is_cold(kernels[:1]), kernel_cache.is_cold(kernels[1:]))
+print(len(kernel_cache.uncached(kernels)))
 print(sorted(len(kernel_cache._dispatcher(kernel).overloads) for kernel in kernels))
 """
 
@@ -213,5 +244,5 @@ def test_a_forked_worker_compiles_its_share_into_the_cache(tmp_path):
     )
     started, cold, overloads = result.stdout.split("\n")[:3]
     assert started == "True"
-    assert cold == "False False"  # both kernels are in numba's cache now
+    assert cold == "0"  # both kernels are in numba's cache now
     assert overloads == "[0, 1]"  # one compiled here, the other only by the worker
