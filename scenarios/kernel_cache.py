@@ -314,7 +314,8 @@ def _redirect_caches(folder: str) -> None:
 
     numba.config.CACHE_DIR = folder
     for module in list(sys.modules.values()):
-        for value in list(vars(module).values()):
+        # getattr: sys.modules may hold None (an import known to fail) or proxies.
+        for value in list(getattr(module, "__dict__", {}).values()):
             if isinstance(value, Dispatcher) and isinstance(value._cache, FunctionCache):
                 value.enable_caching()
 
