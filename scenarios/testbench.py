@@ -58,7 +58,6 @@ from scenarios.sharing import SegmentPublisher
 from scenarios.spec import ScenarioSpec
 from scenarios.vehicle import RELOCALIZE_ATTEMPTS, SETTLE_STEPS, ZONES, Vehicle
 from semistatic.fleet import FleetMapStore
-from semistatic.frames import wrap_angle_compiled
 from semistatic.local_map import LocalMap
 from sim.client import SimClient
 from sim.people import People
@@ -172,12 +171,10 @@ class Testbench:
         (1, 4, True)
         """
         self.close()
-        # A cold kernel cache (the first run after installation) is compiled on every
-        # core at once, and numba sets up its compiler and type registries on a process's
-        # first compiled call (~0.1 s, cached kernels or not): start-up like an import,
-        # not the run's time.
+        # numba's one-time set-up, and the kernels missing from its cache (the first run
+        # after installation or an upgrade) compiled on every core at once: start-up like
+        # an import, not the run's time.
         warm_kernel_cache()
-        wrap_angle_compiled(0.0)
         self._wall_start = time.perf_counter()
         spec = self.spec if seed is None else dataclasses.replace(self.spec, seed=seed)
         self.log_spec = spec
