@@ -53,6 +53,7 @@ __all__ = [
     "SafetyPolicy",
     "SafetySupervisor",
     "field_occupancy",
+    "points_inside",
     "scan_points_in_robot_frame",
 ]
 
@@ -214,20 +215,42 @@ def field_occupancy(points_robot: ArrayLike, field_set: FieldSet, min_points: in
 def _count_inside(
     polygon: shapely.Polygon, bounds: tuple[float, ...], x: np.ndarray, y: np.ndarray
 ) -> int:
-    """Return how many points intersect ``polygon``, testing only those in its bounding box.
+    """Return how many points intersect ``polygon`` (see :func:`points_inside`)."""
+    return int(np.count_nonzero(_inside(polygon, bounds, x, y)))
+
+
+def points_inside(geometry: shapely.Geometry, points: ArrayLike) -> np.ndarray:
+    """Return which robot-frame points intersect ``geometry`` (boundary counts as inside).
+
+    ``nan`` rows are never inside.
+
+    Examples
+    --------
+    >>> square = shapely.box(0.0, 0.0, 1.0, 1.0)
+    >>> points_inside(square, [[0.5, 0.5], [1.0, 0.2], [2.0, 0.0], [np.nan, np.nan]])
+    array([ True,  True, False, False])
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    return _inside(geometry, tuple(geometry.bounds), pts[:, 0], pts[:, 1])
+
+
+def _inside(
+    geometry: shapely.Geometry, bounds: tuple[float, ...], x: np.ndarray, y: np.ndarray
+) -> np.ndarray:
+    """Return which points intersect ``geometry``, testing only those in its bounding box.
 
     A scan has hundreds of points and a field holds a few: comparing coordinates with
     the (closed) bounding box first leaves the exact predicate a handful to check, with
-    the same count (a point outside the box cannot touch the polygon; nan never is in).
+    the same answer (a point outside the box cannot touch the polygon; nan never is in).
     """
     x_min, y_min, x_max, y_max = bounds
     near = x >= x_min
     near &= x <= x_max
     near &= y >= y_min
     near &= y <= y_max
-    if not near.any():
-        return 0
-    return int(np.count_nonzero(shapely.intersects_xy(polygon, x[near], y[near])))
+    if near.any():
+        near[near] = shapely.intersects_xy(geometry, x[near], y[near])
+    return near
 
 
 def scan_points_in_robot_frame(scan: Scan, mount: ArrayLike) -> np.ndarray:

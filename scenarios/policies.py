@@ -1,18 +1,20 @@
 """Safety-field policies: which laser readings count against a segment's fields.
 
 The paper leaves the use of the local maps to "the developers of the navigation system";
-a policy is that choice. At every safety scan the :class:`~scenarios.testbench.Testbench`
-hands the policy a :class:`FieldView` (the readings in the robot frame, the segment, its
-local map, the EKF pose) and the policy answers with :class:`FieldReadings`: masks of the
+a policy is that choice. At every safety scan the vehicle hands the policy a
+:class:`FieldView` (the readings in the robot frame, read-only; the segment, its local
+map, the EKF pose) and the policy answers with :class:`FieldReadings`: masks of the
 readings that count for the warning field and for the protective field. ``None`` (or
 :data:`ALL_READINGS`) keeps every reading, as a plain safety scanner does.
 
-A policy may reshape or ignore the warning field as it likes (count fewer readings, or
-none), but the protective field cannot be configured away: whatever a policy answers,
-every reading inside the segment's *minimum protective field* (the
-``safety.min_protective_depth`` nearest metres of it,
-:func:`semistatic.adaptation.minimum_protective_field`) counts, so a person in front of
-the robot always stops it.
+A policy may reshape or ignore the fields as it likes (count fewer readings, or none),
+but it cannot configure the stop away: whatever it answers, every reading inside the
+vehicle's *stop envelope* counts for both fields. The envelope is what the vehicle could
+touch before it stands: its footprint swept over the stopping distance at the measured
+speed (never less than ``safety.min_protective_depth``), grown by
+``safety.general_supplement`` on every side (:func:`robots.stopping.stop_envelope`). So a
+person in front of or beside the vehicle always stops it, and a field drawn too short
+does not hide them.
 
 Write a policy as any object with a ``name`` and a ``counted_readings(view)`` method
 (and, optionally, ``start_lap(local_maps)``, called as each lap starts with the maps of
@@ -48,7 +50,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import shapely
 
-from robots.safety import FieldSet, FieldState, field_occupancy
+from robots.safety import FieldSet, FieldState, points_inside
 from scenarios.segments import PathSegment
 from scenarios.spec import POLICIES, SafetySettings
 from semistatic.adaptation import explained_readings
@@ -62,6 +64,7 @@ __all__ = [
     "FieldPolicy",
     "FieldReadings",
     "FieldView",
+    "checked_readings",
     "counted_occupancy",
     "field_policy",
     "known_objects",
@@ -76,13 +79,14 @@ class FieldView:
     Parameters
     ----------
     points
-        ``(N, 2)`` valid safety-laser end points in the robot frame (x ahead, y left).
+        ``(N, 2)`` valid safety-laser end points in the robot frame (x ahead, y left),
+        read-only: the vehicle counts its own copy.
     segment
         The path segment the robot is on; ``segment.fields`` holds its warning and
         protective polygons (robot frame).
-    minimum_field
-        The segment's minimum protective field (robot frame): readings inside it always
-        count for the protective field, whatever the policy answers.
+    stop_envelope
+        The vehicle's stop envelope now (robot frame): readings inside it count for both
+        fields, whatever the policy answers.
     robot_pose
         The EKF's robot pose ``(x, y, theta)`` in the world frame.
     local_map
@@ -100,14 +104,22 @@ class FieldView:
     ...                  LocalMap(), load_scenario("pal1").safety)
     >>> view.segment.name
     'niches'
+    >>> view.points.flags.writeable
+    False
     """
 
     points: np.ndarray
     segment: PathSegment
-    minimum_field: shapely.Geometry
+    stop_envelope: shapely.Geometry
     robot_pose: np.ndarray
     local_map: LocalMap
     settings: SafetySettings
+
+    def __post_init__(self) -> None:
+        # A copy the policy may look at but not write: the vehicle counts its own.
+        points = np.array(self.points, dtype=float)
+        points.flags.writeable = False
+        object.__setattr__(self, "points", points)
 
 
 @dataclass(frozen=True)
@@ -215,9 +227,7 @@ class AdaptivePolicy:
             return None
         world_points = transform_points(view.robot_pose, view.points)
         unexplained = ~explained_readings(world_points, known, view.settings.adaptive_margin)
-        # The warning field keeps what the protective floor keeps: its count includes them.
-        floor = shapely.contains_xy(view.minimum_field, view.points[:, 0], view.points[:, 1])
-        return FieldReadings(warning=unexplained | floor, protective=unexplained)
+        return FieldReadings(warning=unexplained, protective=unexplained)
 
 
 def known_objects(local_map: LocalMap) -> list[np.ndarray]:
@@ -284,39 +294,80 @@ def policy_name(policy: str | FieldPolicy) -> str:
     return policy if isinstance(policy, str) else str(policy.name)
 
 
+def checked_readings(policy: FieldPolicy, readings: object, count: int) -> FieldReadings | None:
+    """Return a policy's answer for ``count`` readings, or raise naming what is wrong.
+
+    An answer is ``None`` or :class:`FieldReadings` whose masks are ``None`` or ``(count,)``
+    boolean arrays; anything else (an integer array would silently index instead of
+    mask) is a ``TypeError`` naming the policy and the hook.
+
+    Examples
+    --------
+    >>> checked_readings(ConservativePolicy(), FieldReadings(np.ones(2, dtype=bool)), 2)
+    FieldReadings(warning=array([ True,  True]), protective=None)
+    >>> checked_readings(ConservativePolicy(), FieldReadings(np.ones(3, dtype=int)), 3)
+    Traceback (most recent call last):
+    ...
+    TypeError: policy 'conservative': counted_readings(view).warning must be None or a \
+(3,) bool array (one entry per view.points row), got int64 array of shape (3,)
+    """
+    if readings is None:
+        return None
+    name = f"policy {policy_name(policy)!r}: counted_readings(view)"
+    if not isinstance(readings, FieldReadings):
+        raise TypeError(
+            f"{name} must return FieldReadings or None, got {type(readings).__name__}"
+        )
+    for field_name in ("warning", "protective"):
+        mask = getattr(readings, field_name)
+        if mask is None:
+            continue
+        if not (isinstance(mask, np.ndarray) and mask.dtype == bool and mask.shape == (count,)):
+            got = (f"{mask.dtype} array of shape {mask.shape}" if isinstance(mask, np.ndarray)
+                   else type(mask).__name__)
+            raise TypeError(
+                f"{name}.{field_name} must be None or a ({count},) bool array (one entry "
+                f"per view.points row), got {got}"
+            )
+    return readings
+
+
 def counted_occupancy(
     points: np.ndarray,
     fields: FieldSet,
-    minimum_field: shapely.Geometry,
+    stop_envelope: shapely.Geometry,
     readings: FieldReadings | None,
     min_points: int,
 ) -> FieldState:
-    """Count the readings a policy lets count in each field, never less than the floor.
+    """Count the readings a policy lets count in each field, and every one that must stop.
 
-    Every reading inside ``minimum_field`` counts for the protective field whatever
-    ``readings`` says: the stop for a person cannot be configured away.
+    A reading counts for a field when it lies inside the field and the policy's mask lets
+    it count, or when it lies inside ``stop_envelope`` (what the vehicle could touch
+    before it stands, :func:`robots.stopping.stop_envelope`), wherever that is: a policy
+    can shrink a field, it cannot configure the stop away, and a field drawn too short or
+    too narrow does not hide what stands beside or just ahead of the vehicle.
 
     Examples
     --------
     >>> fields = FieldSet([(0, -1), (2, -1), (2, 1), (0, 1)], [(0, -1), (1, -1), (1, 1), (0, 1)])
-    >>> floor = shapely.box(0.0, -1.0, 0.2, 1.0)
-    >>> points = np.array([[0.1, 0.0], [0.5, 0.0], [1.5, 0.0]])
-    >>> nothing = np.zeros(3, dtype=bool)
-    >>> counted_occupancy(points, fields, floor, FieldReadings(nothing, nothing), 1)
-    FieldState(warning_count=0, protective_count=1, min_points=1)
-    >>> counted_occupancy(points, fields, floor, None, 1)
-    FieldState(warning_count=3, protective_count=2, min_points=1)
+    >>> envelope = shapely.box(-0.5, -0.5, 0.2, 0.5)
+    >>> points = np.array([[0.1, 0.0], [0.5, 0.0], [1.5, 0.0], [-0.3, 0.4]])
+    >>> nothing = np.zeros(4, dtype=bool)
+    >>> counted_occupancy(points, fields, envelope, FieldReadings(nothing, nothing), 1)
+    FieldState(warning_count=2, protective_count=2, min_points=1)
+    >>> counted_occupancy(points, fields, envelope, None, 1)
+    FieldState(warning_count=4, protective_count=3, min_points=1)
     """
-    if readings is None or (readings.warning is None and readings.protective is None):
-        return field_occupancy(points, fields, min_points)
-    warning = points if readings.warning is None else points[readings.warning]
-    if readings.protective is None:
-        protective = points
-    else:
-        floor = shapely.contains_xy(minimum_field, points[:, 0], points[:, 1])
-        protective = points[np.asarray(readings.protective, dtype=bool) | floor]
+    must_stop = points_inside(stop_envelope, points)
+    warning = points_inside(fields.warning_polygon, points)
+    protective = points_inside(fields.protective_polygon, points)
+    if readings is not None:
+        if readings.warning is not None:
+            warning &= readings.warning
+        if readings.protective is not None:
+            protective &= readings.protective
+    warning |= must_stop
+    protective |= must_stop
     return FieldState(
-        field_occupancy(warning, fields, min_points).warning_count,
-        field_occupancy(protective, fields, min_points).protective_count,
-        int(min_points),
+        int(np.count_nonzero(warning)), int(np.count_nonzero(protective)), int(min_points)
     )

@@ -104,9 +104,10 @@ class SafetySettings:
     field stops the robot. ``release_delay`` (s) keeps the reaction after the field clears.
     ``min_points`` readings must fall in a field before it counts (one noisy beam is
     ignored). Under the ``adaptive`` policy, readings within ``adaptive_margin`` (m) of a
-    known semi-static object of the current segment no longer count, except inside the
-    ``min_protective_depth`` (m) nearest part of the protective field, which is never given
-    up.
+    known semi-static object of the current segment no longer count. Whatever the policy,
+    every reading in the vehicle's stop envelope counts (the footprint swept over the
+    stopping distance at the measured speed, at least ``min_protective_depth`` ahead,
+    grown by ``general_supplement`` on every side; :mod:`scenarios.policies`).
 
     Parameters
     ----------
@@ -119,7 +120,10 @@ class SafetySettings:
     adaptive_margin
         Distance (m) from a known object within which readings no longer count (adaptive).
     min_protective_depth
-        Depth (m) of the protective field that the adaptive policy never gives up.
+        Least reach (m) of the stop envelope ahead of the footprint, even at standstill.
+    general_supplement
+        Margin (m) around the swept footprint in which a reading stops the vehicle
+        whatever the policy (a scanner's measurement error; Sick's manuals use 0.1 m).
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
@@ -127,6 +131,7 @@ class SafetySettings:
     min_points: int = field(default=3, metadata=bounds(ge=1, le=100))
     adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
     min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
+    general_supplement: float = field(default=0.10, metadata=bounds(ge=0.0, le=1.0))
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -47,12 +47,12 @@ from robots.landmarks import detect_landmarks
 from robots.lasers import LaserSpec
 from robots.presets import UGVSpec
 from robots.safety import FieldState, SafetyPolicy, SafetySupervisor, scan_points_in_robot_frame
+from robots.stopping import blind_reach, stop_envelope, stopping_distance
 from scenarios.observers import hook_table
-from scenarios.policies import FieldView, counted_occupancy, field_policy
+from scenarios.policies import FieldView, checked_readings, counted_occupancy, field_policy
 from scenarios.records import LapLog, RunLog, ScanRecord
 from scenarios.routes import fleet_frames
 from scenarios.segments import PathSegment, path_segments, segment_index
-from semistatic.adaptation import minimum_protective_field
 from semistatic.fleet import FleetMapStore, merge_segment_map
 from semistatic.frames import compose, transform_points
 from semistatic.local_map import LocalMap
@@ -188,10 +188,20 @@ class Vehicle:
                 min_points=spec.safety.min_points,
             ),
         )
-        self.minimum_fields = [
-            minimum_protective_field(seg.fields.protective, spec.safety.min_protective_depth)
-            for seg in self.segments
-        ]
+        # The stop envelope's inputs: a stop request waits up to one safety scan period and
+        # one control period, then the follower brakes at its deceleration limit.
+        self._reaction_time = 1.0 / spec.rates.safety_hz + 1.0 / spec.rates.control_hz
+        self._deceleration = self.follower.params.max_deceleration
+        self._footprint = np.asarray(robot.footprint, dtype=float)
+        # The envelope reaches at least min_protective_depth ahead, and past the safety
+        # laser's blind zone: a reading it cannot see would never stop the vehicle.
+        self._least_reach = max(
+            spec.safety.min_protective_depth,
+            blind_reach(self._footprint, robot.safety_laser.x, robot.safety_laser.laser.range_min),
+        )
+        # Forward travel (m, encoders) since the last safety scan, and that scan's time.
+        self._travelled = 0.0
+        self._travel_since = 0.0
         self._local_maps = {
             seg.name: LocalMap(seg.origin, [seg.safety_area], params=spec.mapper, segment=seg.name)
             for seg in self.segments
@@ -388,6 +398,7 @@ class Vehicle:
         self._lap_counters = (0, 0, 0)
         self.speed_scale = 1.0
         self._zone = "clear"
+        self._travelled, self._travel_since = 0.0, sim.sim_time
         self.lap_log = LapLog(lap=lap, start_time=sim.sim_time, first_tick=len(self.log.stamps))
         self._relocalize(lap)
         # Like the EKF, odometry restarts from the triangulated pose: the robot was carried.
@@ -465,6 +476,7 @@ class Vehicle:
     # ------------------------------------------------------------------ pieces
     def _predict(self) -> None:
         increment, covariance = self.encoders.read(self.body.wheel_angles())
+        self._travelled += increment[0]
         self.ekf.predict(increment, covariance)
         self.odom_pose = compose(self.odom_pose, increment)
 
@@ -489,7 +501,7 @@ class Vehicle:
         local_map = self._local_maps[segment.name]
         ekf_pose = self.ekf.pose  # a copy; nothing below changes the EKF
         output = self.supervisor.update(
-            self._occupancy(points, segment, index, local_map, ekf_pose), scan.stamp)
+            self._occupancy(points, segment, scan.stamp, local_map, ekf_pose), scan.stamp)
         if output.zone == "protective":
             self.lap_log.stopped_time_s += self._safety_dt
         elif output.zone == "warning":
@@ -559,12 +571,23 @@ class Vehicle:
         masked[np.flatnonzero(finite)[on_vehicle]] = np.nan
         return dataclasses.replace(scan, ranges=masked)
 
-    def _occupancy(self, points: np.ndarray, segment: PathSegment, index: int,
+    def _stop_envelope(self, stamp: float):
+        """Return the stop envelope at the speed the encoders measured since the last scan."""
+        elapsed = stamp - self._travel_since
+        speed = self._travelled / elapsed if elapsed > 0.0 else 0.0
+        self._travelled, self._travel_since = 0.0, stamp
+        reach = max(stopping_distance(speed, self._reaction_time, self._deceleration),
+                    self._least_reach)
+        return stop_envelope(self._footprint, reach if speed >= 0.0 else -reach,
+                             self.log.spec.safety.general_supplement)
+
+    def _occupancy(self, points: np.ndarray, segment: PathSegment, stamp: float,
                    local_map: LocalMap, ekf_pose: np.ndarray) -> FieldState:
-        """Ask the policy which readings count; the protective floor is enforced there."""
-        minimum = self.minimum_fields[index]
-        readings = self.policy.counted_readings(
-            FieldView(points, segment, minimum, ekf_pose, local_map, self.log.spec.safety)
+        """Ask the policy which readings count; the stop envelope counts whatever it says."""
+        envelope = self._stop_envelope(stamp)
+        answer = self.policy.counted_readings(
+            FieldView(points, segment, envelope, ekf_pose, local_map, self.log.spec.safety)
         )
-        return counted_occupancy(points, segment.fields, minimum, readings,
+        readings = checked_readings(self.policy, answer, len(points))
+        return counted_occupancy(points, segment.fields, envelope, readings,
                                  self.supervisor.policy.min_points)

@@ -3,10 +3,9 @@
 The paper's proposal: once a semi-static object is in the local map of a path segment,
 "reduce one or both the safety areas ... so that no obstacle lies inside" them, so the
 next vehicle is not slowed or stopped by an object that is already known. We shrink a
-field by cutting out a ``margin``-wide band around every known object polyline, but never
-below a *minimum protective field*: the part of the protective field nearest the robot
-stays whole, so anything that enters it (a person stepping out from behind a known box)
-still stops the vehicle.
+field by cutting out a ``margin``-wide band around every known object polyline; the
+vehicle's stop envelope stays whole whatever the policy (:mod:`scenarios.policies`), so
+anything that enters it (a person stepping out from behind a known box) still stops it.
 
 For occupancy, cutting a band out of the polygon is the same as not counting the
 readings that fall inside the band, which is what :func:`explained_readings` computes
@@ -34,7 +33,6 @@ __all__ = [
     "adapted_field",
     "distance_to_polylines",
     "explained_readings",
-    "minimum_protective_field",
 ]
 
 
@@ -90,26 +88,6 @@ def explained_readings(
     distance = distance_to_polylines(points, known_objects)
     with np.errstate(invalid="ignore"):
         return distance <= margin
-
-
-def minimum_protective_field(protective: ArrayLike, depth: float) -> shapely.Polygon:
-    """Return the part of the protective field within ``depth`` of its nearest edge (robot frame).
-
-    The protective field starts at the robot's front (its smallest x); the minimum field
-    keeps ``x <= x_front + depth`` of it.
-
-    Examples
-    --------
-    >>> field = [[0.25, -0.3], [0.6, -0.3], [0.6, 0.3], [0.25, 0.3]]
-    >>> round(minimum_protective_field(field, 0.15).area, 6)
-    0.09
-    """
-    if not depth > 0:
-        raise ValueError(f"minimum_protective_field: depth must be > 0 m (got {depth})")
-    polygon = shapely.Polygon(np.asarray(protective, dtype=float))
-    x_min, y_min, _, y_max = polygon.bounds
-    keep = shapely.box(x_min - 1.0, y_min - 1.0, x_min + depth, y_max + 1.0)
-    return polygon.intersection(keep)
 
 
 def adapted_field(

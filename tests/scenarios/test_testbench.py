@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import shapely
 
 from robots.safety import FieldSet
 from scenarios import Testbench, bundled_scenarios
@@ -11,7 +12,6 @@ from scenarios.load import load_scenario
 from scenarios.outputs import summarize
 from scenarios.policies import FieldReadings, FieldView, counted_occupancy
 from scenarios.runner import run_scenario
-from semistatic.adaptation import minimum_protective_field
 from semistatic.errors import MEMORY
 from tests.scenarios.tiny_world import write_tiny
 from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
@@ -207,36 +207,93 @@ def test_an_unknown_robot_preset_names_the_key(tiny_spec):
         Testbench(tiny_spec, robot="pioner3dx")
 
 
-def test_no_policy_can_ignore_what_stands_in_the_minimum_protective_field():
+def test_no_policy_can_ignore_what_stands_in_the_stop_envelope():
     fields = FieldSet([(0.2, -0.5), (1.5, -0.5), (1.5, 0.5), (0.2, 0.5)],
                       [(0.2, -0.3), (0.7, -0.3), (0.7, 0.3), (0.2, 0.3)])
-    floor = minimum_protective_field(fields.protective, 0.15)  # x in [0.2, 0.35]
+    # A box footprint x in [-0.3, 0.15], |y| <= 0.2, swept 0.1 m ahead, no supplement:
+    # the envelope is the box x in [-0.3, 0.25], |y| <= 0.2 (it starts behind the field).
+    envelope = shapely.box(-0.3, -0.2, 0.25, 0.2)
     rng = np.random.default_rng(5)
-    points = rng.uniform([0.0, -0.6], [1.6, 0.6], size=(400, 2))
+    points = rng.uniform([-0.5, -0.6], [1.6, 0.6], size=(600, 2))
     counted = IgnoreEverything().counted_readings(
-        FieldView(points, None, floor, np.zeros(3), None, None)
+        FieldView(points, None, envelope, np.zeros(3), None, None)
     )
-    state = counted_occupancy(points, fields, floor, counted, min_points=3)
-    # Hand-counted reference: the floor is the protective box cut at x = 0.35.
-    in_floor = (points[:, 0] >= 0.2) & (points[:, 0] <= 0.35) & (np.abs(points[:, 1]) <= 0.3)
-    assert state.warning_count == 0
-    assert state.protective_count == np.count_nonzero(in_floor) > 3
-    assert state.zone == "protective"
-    plain = counted_occupancy(points, fields, floor, None, min_points=3)
+    state = counted_occupancy(points, fields, envelope, counted, min_points=3)
+    # Hand-counted references from the boxes' bounds.
+    in_envelope = (np.abs(points[:, 1]) <= 0.2) & (points[:, 0] >= -0.3) & (points[:, 0] <= 0.25)
     in_protective = (points[:, 0] >= 0.2) & (points[:, 0] <= 0.7) & (np.abs(points[:, 1]) <= 0.3)
-    assert plain.protective_count == np.count_nonzero(in_protective)
+    in_warning = (points[:, 0] >= 0.2) & (points[:, 0] <= 1.5) & (np.abs(points[:, 1]) <= 0.5)
+    assert state.warning_count == state.protective_count == np.count_nonzero(in_envelope) > 3
+    assert state.zone == "protective"
+    plain = counted_occupancy(points, fields, envelope, None, min_points=3)
+    assert plain.protective_count == np.count_nonzero(in_protective | in_envelope)
+    assert plain.warning_count == np.count_nonzero(in_warning | in_envelope)
+
+
+def test_a_policy_sees_a_read_only_copy_of_the_readings():
+    points = np.array([[1.0, 0.0], [2.0, 0.5]])
+    view = FieldView(points, None, shapely.Polygon(), np.zeros(3), None, None)
+    with pytest.raises(ValueError, match="read-only"):
+        view.points[0, 0] = 9.0
+    view.points.flags.writeable = True  # its own copy: writing it changes nothing else
+    view.points[:] = 100.0
+    assert points[0, 0] == 1.0
+
+
+class NothingCounts:
+    """Answers "no reading counts" for both fields, at every scan."""
+
+    name = "nothing-counts"
+
+    def counted_readings(self, view):
+        nothing = np.zeros(len(view.points), dtype=bool)
+        return FieldReadings(warning=nothing, protective=nothing)
+
+
+class ReadingEditor:
+    """Moves every reading it is shown out of the fields, then lets them all count."""
+
+    name = "reading-editor"
+
+    def counted_readings(self, view):
+        view.points.flags.writeable = True
+        view.points[:] = 100.0
+        return None
 
 
 @pytest.mark.slow
-def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b():
-    spec = load_scenario("pal3b", overrides=["laps=1"])
-    with Testbench(spec, policy=IgnoreWarning()) as bench:
+@pytest.mark.parametrize("policy", [IgnoreWarning(), NothingCounts(), ReadingEditor()],
+                         ids=lambda policy: policy.name)
+def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b(policy):
+    spec = load_scenario("pal3b", overrides=["laps=1", "seed=0"])
+    with Testbench(spec, policy=policy) as bench:
         metrics = summarize(bench.run())
     safety = metrics["safety"]
-    # The worker walks into the protective field: the warning field was never needed.
-    assert safety["slowdowns"] == 0
+    # The worker stands in the stop envelope: whatever the policy, the robot stops.
     assert safety["stops_per_lap"][0] >= 1
     assert safety["collisions"] == 0
+
+
+class WrongAnswer:
+    def __init__(self, answer):
+        self.answer = answer
+        self.name = "wrong-answer"
+
+    def counted_readings(self, view):
+        return self.answer(len(view.points))
+
+
+@pytest.mark.parametrize(("answer", "message"), [
+    (lambda n: (None, None), "must return FieldReadings or None, got tuple"),
+    (lambda n: FieldReadings(warning=np.ones(n + 1, dtype=bool)), r"\(\d+,\) bool array"),
+    (lambda n: FieldReadings(protective=np.ones(n, dtype=int)), "int64 array"),
+    (lambda n: FieldReadings(warning=[True] * n), "got list"),
+])
+def test_a_policy_answering_something_else_than_masks_is_named(tiny_spec, answer, message):
+    with Testbench(tiny_spec, policy=WrongAnswer(answer)) as bench:
+        bench.reset(seed=0)
+        with pytest.raises(TypeError, match=f"policy 'wrong-answer': counted_readings.*{message}"):
+            bench.run_lap()
 
 
 @pytest.mark.slow
