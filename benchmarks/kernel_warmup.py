@@ -1,7 +1,7 @@
 """Call every compiled kernel once and print the seconds it took (the start-up cost).
 
 Run in a fresh process: with an empty ``NUMBA_CACHE_DIR`` it measures compilation (the
-first run after installation: :func:`scenarios.kernel_cache.warm_kernel_cache` first, as
+first run after installation: :func:`semistatic.kernel_cache.warm_kernel_cache` first, as
 a run starts, then the calls), with the cache filled by that run it measures loading the
 cached machine code (every later run). ``benchmarks/test_bench_goals.py`` runs it both
 ways; by hand::
@@ -10,7 +10,7 @@ ways; by hand::
 
 ``--record`` (empty cache, ``SEMISTATIC_PARALLEL_COMPILE=0``) writes the kernels the calls
 compiled, with their argument types and compile seconds, to
-``scenarios/kernel_signatures.toml``; ``--check`` prints the differences to that file.
+``semistatic/kernel_signatures.toml``; ``--check`` prints the differences to that file.
 """
 
 from __future__ import annotations
@@ -26,7 +26,9 @@ from benchmarks.test_bench_mapper import hall
 from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, detect_landmarks
 from robots.path import SplinePath
-from scenarios.kernel_cache import (
+from semistatic.association import associate, sort_ccw
+from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
+from semistatic.kernel_cache import (
     SIGNATURES_FILE,
     SWITCH,
     Kernel,
@@ -34,8 +36,6 @@ from scenarios.kernel_cache import (
     type_text,
     warm_kernel_cache,
 )
-from semistatic.association import associate, sort_ccw
-from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
 from semistatic.mapper import PolylineMap
 from semistatic.merge import project_onto
 from semistatic.polyline import Polyline
@@ -108,7 +108,7 @@ def compiled_kernels() -> tuple[list[Kernel], float]:
 
 
 def _signature_file(kernels: list[Kernel]) -> str:
-    lines = ["# The kernels a first `semistatic run` compiles (scenarios/kernel_cache.py).",
+    lines = ["# The kernels a first `semistatic run` compiles (semistatic/kernel_cache.py).",
              "# Written by `python -m benchmarks.kernel_warmup --record`: do not edit.", ""]
     for kernel in kernels:
         arguments = ", ".join(f'"{text}"' for text in kernel.arguments)

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from scenarios import Testbench
-from scenarios.load import load_scenario
+from scenarios.spec.load import load_scenario
 
 SIM_SECONDS = 20.0
 ROUNDS = 3

@@ -30,15 +30,15 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-import scenarios.testbench as testbench_module
+import scenarios.bench.testbench as testbench_module
 from benchmarks.test_bench_mapper import SCANS, hall, replayed_ms
 from robots.ekf import EKFLocalizer
 from robots.follower import ChainedFormFollower
-from scenarios.kernel_cache import SWITCH
-from scenarios.load import load_scenario
-from scenarios.observers import ScanCallback
-from scenarios.runner import run_scenario
-from scenarios.vehicle import Vehicle
+from scenarios.bench.observers import ScanCallback
+from scenarios.bench.runner import run_scenario
+from scenarios.bench.vehicle import Vehicle
+from scenarios.spec.load import load_scenario
+from semistatic.kernel_cache import SWITCH
 from semistatic.local_map import LocalMap
 from semistatic.mapper import PolylineMap
 from sim.client import SimClient
@@ -165,7 +165,7 @@ def test_speed_goals_table(monkeypatch):
 
 
 def test_recorded_kernel_signatures_are_what_a_first_run_compiles():
-    """``scenarios/kernel_signatures.toml`` is current (else: ``kernel_warmup --record``).
+    """``semistatic/kernel_signatures.toml`` is current (else: ``kernel_warmup --record``).
 
     A stale file costs only speed: what it misses compiles lazily, in the run.
     """

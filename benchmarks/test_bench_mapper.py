@@ -23,9 +23,9 @@ import time
 import numpy as np
 import pytest
 
-import scenarios.testbench as testbench_module
-from scenarios.load import load_scenario
-from scenarios.observers import ScanCallback
+import scenarios.bench.testbench as testbench_module
+from scenarios.bench.observers import ScanCallback
+from scenarios.spec.load import load_scenario
 from semistatic.local_map import LocalMap
 from semistatic.mapper import PolylineMap
 from tests.semistatic.synthetic import box, cast_scan, scene, wall

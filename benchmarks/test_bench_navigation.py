@@ -36,9 +36,9 @@ from robots.lasers import LMS100
 from robots.path import SplinePath
 from robots.presets import PIONEER3DX
 from robots.safety import FieldSet, field_occupancy, scan_points_in_robot_frame
-from scenarios.outputs import summarize
-from scenarios.runner import run_scenario
-from scenarios.spec import ScenarioSpec
+from scenarios.bench.runner import run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.scenario import ScenarioSpec
 from semistatic.frames import transform_points
 from sim.client import SimClient
 from sim.contacts import ContactMonitor

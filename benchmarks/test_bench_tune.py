@@ -34,13 +34,13 @@ from pathlib import Path
 import optuna
 import pytest
 
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.recording import ScanRecorder, read_recording, replay
-from scenarios.runner import run_scenario
-from scenarios.tune_params import parse_params
-from scenarios.tune_run import PoolBackend, RayBackend, RecordingSet
-from scenarios.tune_search import SearchConfig, open_study, run_study
+from scenarios.bench.runner import run_scenario
+from scenarios.logs.recording import ScanRecorder, read_recording, replay
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
+from scenarios.tuning.params import parse_params
+from scenarios.tuning.run import PoolBackend, RayBackend, RecordingSet
+from scenarios.tuning.search import SearchConfig, open_study, run_study
 
 pytestmark = pytest.mark.bench
 

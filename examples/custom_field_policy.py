@@ -2,7 +2,7 @@
 
 The paper leaves the use of the local maps to "the developers of the navigation
 system". A policy decides, at every safety scan, which laser readings count against
-the warning and the protective field (:mod:`scenarios.policies`). This one, *short
+the warning and the protective field (:mod:`scenarios.bench.policies`). This one, *short
 warning*, keeps the protective field whole and lets the warning field count only the
 readings closer than ``reach`` metres ahead: a shorter braking zone, at the price of
 less warning. Whatever a policy answers, readings in the vehicle's stop envelope
@@ -18,8 +18,8 @@ from __future__ import annotations
 import argparse
 
 from scenarios import Testbench, load_scenario
-from scenarios.outputs import summarize
-from scenarios.policies import FieldReadings, FieldView
+from scenarios.bench.policies import FieldReadings, FieldView
+from scenarios.results.outputs import summarize
 
 
 class ShortWarning:

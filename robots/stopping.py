@@ -10,7 +10,7 @@ reaction time ``T`` and deceleration ``a`` the stopping distance is
 of ISO 13855's ``S = K T + C``). Anything the vehicle could touch before it stands lies
 in its *stop envelope*: the footprint swept ``S`` metres along the direction of travel,
 grown by a supplement on every side. A reading there must stop the vehicle whatever a
-field policy decides (:mod:`scenarios.policies`).
+field policy decides (:mod:`scenarios.bench.policies`).
 
 Examples
 --------

@@ -9,10 +9,10 @@ Examples
 ('walker',)
 """
 
-from scenarios.layout import lap_worlds, scenario_world, world_for_lap
-from scenarios.load import bundled_scenarios, load_scenario
-from scenarios.spec import ScenarioSpec
-from scenarios.testbench import Testbench
+from scenarios.bench.testbench import Testbench
+from scenarios.spec.layout import lap_worlds, scenario_world, world_for_lap
+from scenarios.spec.load import bundled_scenarios, load_scenario
+from scenarios.spec.scenario import ScenarioSpec
 
 __all__ = [
     "ScenarioSpec",

@@ -17,12 +17,12 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from scenarios.evaluate import add_parser as add_evaluate_parser
-from scenarios.evaluate import main_evaluate
-from scenarios.output_dir import check_output_dir, stage_and_publish
-from scenarios.progress import count_progress, scan_progress, sim_progress
-from scenarios.tune import add_parser as add_tune_parser
-from scenarios.tune import main_tune
+from scenarios.logs.evaluate import add_parser as add_evaluate_parser
+from scenarios.logs.evaluate import main_evaluate
+from scenarios.process.progress import count_progress, scan_progress, sim_progress
+from scenarios.process.staging import check_output_dir, stage_and_publish
+from scenarios.tuning.command import add_parser as add_tune_parser
+from scenarios.tuning.command import main_tune
 from semistatic.errors import SpecError
 from semistatic.validation import Range, as_float, as_int
 
@@ -35,7 +35,7 @@ EXIT_INTERRUPTED = 130
 MAX_JOBS = 256
 """More worker processes than this is a typo, not a machine."""
 
-# scenarios.bag.BAG_STORAGES, spelled out so that --help does not import rosbags.
+# scenarios.logs.bag.BAG_STORAGES, spelled out so that --help does not import rosbags.
 BAG_STORAGE_CHOICES = ("sqlite3", "mcap")
 
 
@@ -143,8 +143,8 @@ def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
 
     ``--laps`` and ``--seed`` are applied as overrides; an error in them names the option.
     """
-    from scenarios.layout import scenario_world
-    from scenarios.load import OVERRIDE_FILE, load_scenario
+    from scenarios.spec.layout import scenario_world
+    from scenarios.spec.load import OVERRIDE_FILE, load_scenario
 
     options = [(option, key, value) for option, key, value in
                (("--laps", "laps", laps), ("--seed", "seed", seed)) if value is not None]
@@ -179,7 +179,7 @@ def _check_display(gui: bool) -> None:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from scenarios.layout import lap_worlds
+    from scenarios.spec.layout import lap_worlds
     from worlds.checks import build_spline
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
@@ -201,10 +201,10 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from scenarios.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
-    from scenarios.outputs import summarize, write_outputs
-    from scenarios.recording import ScanRecorder, check_new_recording_path
-    from scenarios.runner import run_scenario
+    from scenarios.bench.runner import run_scenario
+    from scenarios.logs.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
+    from scenarios.logs.recording import ScanRecorder, check_new_recording_path
+    from scenarios.results.outputs import summarize, write_outputs
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     out = check_output_dir(args.out if args.out is not None else Path("results") / spec.name)
@@ -326,8 +326,8 @@ def _run_summary(metrics: dict, out: Path) -> str:
 
 def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dict]:
     """Run one bundled scenario (in a worker) and write its folder into the staging dir."""
-    from scenarios.outputs import summarize, write_outputs
-    from scenarios.runner import run_scenario
+    from scenarios.bench.runner import run_scenario
+    from scenarios.results.outputs import summarize, write_outputs
 
     name, laps, staging, figures, compare = task
     spec, _ = _load(name, [], laps)
@@ -341,9 +341,9 @@ def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dic
 
 
 def _table(args: argparse.Namespace) -> int:
-    from scenarios.load import paper_scenarios
-    from scenarios.table import render_table, write_table
-    from scenarios.workers import worker_pool
+    from scenarios.process.workers import worker_pool
+    from scenarios.results.table import render_table, write_table
+    from scenarios.spec.load import paper_scenarios
 
     names = paper_scenarios()
     _check_jobs(args.jobs)
@@ -381,8 +381,8 @@ def _table(args: argparse.Namespace) -> int:
 
 
 def _replay_params(overrides: Sequence[str], max_range: float | None):
-    from scenarios.load import OVERRIDE_FILE, mapper_from_table, parse_override
-    from scenarios.replay import REPLAY_PARAMS
+    from scenarios.logs.real_log import REPLAY_PARAMS
+    from scenarios.spec.load import OVERRIDE_FILE, mapper_from_table, parse_override
 
     table = {}
     for text in overrides:
@@ -398,7 +398,7 @@ def _replay_params(overrides: Sequence[str], max_range: float | None):
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from scenarios.replay import ReplayOptions, open_log, replay, write_replay_outputs
+    from scenarios.logs.real_log import ReplayOptions, open_log, replay, write_replay_outputs
     from semistatic.logs import LogFormatError
 
     params = _replay_params(args.overrides, args.max_range)

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.load import load_scenario
+from scenarios.spec.load import load_scenario
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

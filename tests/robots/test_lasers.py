@@ -7,7 +7,7 @@ import pytest
 
 from robots.lasers import LMS100, S300
 from robots.presets import PRESETS
-from scenarios.spec import Noise
+from scenarios.spec.scenario import Noise
 from tests.spec_errors import raises_spec_error
 
 
@@ -45,7 +45,7 @@ def test_spec_built_in_code_names_the_key(changes, key, message):
 
 def test_the_largest_noise_factors_keep_the_presets_valid():
     # A scenario may scale the preset's noise up to Noise's bounds; the scaled specs that
-    # scenarios.testbench builds must still pass their own bounds.
+    # scenarios.bench.testbench builds must still pass their own bounds.
     fields = {field.name: field for field in dataclasses.fields(Noise)}
     range_factor = fields["range"].metadata["range"].le
     odometry_factor = fields["odometry"].metadata["range"].le

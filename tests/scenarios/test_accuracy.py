@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 import shapely
 
-from scenarios.layout import lap_worlds
-from scenarios.load import load_scenario, paper_scenarios
-from scenarios.outputs import summarize
-from scenarios.runner import run_scenario
+from scenarios.bench.runner import run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.layout import lap_worlds
+from scenarios.spec.load import load_scenario, paper_scenarios
 
 GOLDEN = tomllib.loads((Path(__file__).parent / "golden_accuracy.toml").read_text())
 PAPER_BOUND_CM = 10.0

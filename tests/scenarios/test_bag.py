@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from scenarios.bag import (
+from scenarios.bench.runner import run_scenario
+from scenarios.cli import BAG_STORAGE_CHOICES, main
+from scenarios.logs.bag import (
     BAG_STORAGES,
     BAG_TOPICS,
     BagRecorder,
@@ -14,10 +16,8 @@ from scenarios.bag import (
     check_new_bag_path,
     write_run_bag,
 )
-from scenarios.cli import BAG_STORAGE_CHOICES, main
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.runner import run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
 from semistatic.frames import compose, inverse
 from semistatic.local_map import LocalMap
 from semistatic.logs.rosbag import EKF_TOPIC, MARKER_TOPIC, read_bag

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.load import bundled_scenarios
+from scenarios.spec.load import bundled_scenarios
 from sim.client import SimClient
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import TINY_SCENARIO, TINY_WORLD, write_tiny

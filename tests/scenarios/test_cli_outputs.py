@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from scenarios.output_dir import RESULT_MARKER
+from scenarios.process.staging import RESULT_MARKER
 from tests.scenarios.cli_helpers import run_cli
 from tests.scenarios.tiny_world import TINY_SCENARIO, write_tiny
 

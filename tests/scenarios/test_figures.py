@@ -13,9 +13,9 @@ from matplotlib.figure import Figure
 from matplotlib.image import imread
 
 from robots.path import SplinePath
-from scenarios.figures import ekf as ekf_figure
-from scenarios.figures import laps as lap_figures
-from scenarios.figures import (
+from scenarios.results.figures import ekf as ekf_figure
+from scenarios.results.figures import laps as lap_figures
+from scenarios.results.figures import (
     plot_detection_scores,
     plot_ekf_corrections,
     plot_lap_times,

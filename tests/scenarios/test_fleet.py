@@ -7,11 +7,11 @@ import pytest
 import shapely
 
 from scenarios import Testbench
-from scenarios.layout import scenario_world
-from scenarios.load import load_scenario
-from scenarios.routes import route_from
-from scenarios.segments import path_segments
-from scenarios.spec import VehicleSpec
+from scenarios.spec.layout import scenario_world
+from scenarios.spec.load import load_scenario
+from scenarios.spec.routes import route_from
+from scenarios.spec.scenario import VehicleSpec
+from scenarios.spec.segments import path_segments
 from semistatic.errors import SpecError
 from sim.laser import LASER_IGNORE_GROUP, vehicle_laser_group
 from worlds.checks import build_spline

@@ -25,8 +25,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from scenarios.cli import main
-from scenarios.load import DATA_DIR as SCENARIO_DIR
-from scenarios.load import paper_scenarios
+from scenarios.spec.load import DATA_DIR as SCENARIO_DIR
+from scenarios.spec.load import paper_scenarios
 from worlds.load import DATA_DIR as WORLD_DIR
 
 VALIDATE_EXAMPLES = 300

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.output_dir import RESULT_MARKER
+from scenarios.process.staging import RESULT_MARKER
 from tests.scenarios.tiny_world import write_tiny
 
 pytestmark = pytest.mark.slow

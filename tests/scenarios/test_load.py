@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from robots.presets import get_preset
-from scenarios.layout import check_moves, lap_worlds, scenario_world, world_for_lap
-from scenarios.load import (
+from scenarios.spec.layout import check_moves, lap_worlds, scenario_world, world_for_lap
+from scenarios.spec.load import (
     OVERRIDE_FILE,
     bundled_scenarios,
     load_scenario,
@@ -24,7 +24,7 @@ from scenarios.load import (
     parse_override,
     scenario_from_toml,
 )
-from scenarios.spec import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
+from scenarios.spec.scenario import BoxMove, Noise, Rates, SafetySettings, ScenarioSpec
 from semistatic.errors import SpecError
 from semistatic.params import MapperParams
 from worlds.checks import PIONEER_FOOTPRINT, layout_problems

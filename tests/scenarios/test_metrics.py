@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from scenarios.metrics import (
+from scenarios.results.metrics import (
     clip_to_area,
     detection_scores,
     ekf_correction_metrics,

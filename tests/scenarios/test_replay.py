@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.replay import ReplayOptions, replay
+from scenarios.logs.real_log import ReplayOptions, replay
 from semistatic.alignment import AlignmentParams
 from semistatic.types import Scan
 from tests.semistatic.synthetic import box, raycast, scene, wall

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.replay import ReplayOptions, open_log, replay
+from scenarios.logs.real_log import ReplayOptions, open_log, replay
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.replay import (
+from scenarios.logs.real_log import (
     NOISE_EPSILON_SIGMAS,
     REPLAY_PARAMS,
     ReplayOptions,

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
+from scenarios.bench.runner import Schedule, run_scenario
 from scenarios.cli import main
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.runner import Schedule, run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
 from tests.scenarios.tiny_world import write_tiny
 
 

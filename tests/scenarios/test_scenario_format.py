@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.scenario_format import NOT_IN_FILES, SECTIONS, field_rows, render
+from scenarios.spec.format import NOT_IN_FILES, SECTIONS, field_rows, render
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "scenario-format.md"
 
 
 def test_the_page_is_current():
     assert DOC.read_text() == render(), (
-        "docs/scenario-format.md is stale: python -m scenarios.scenario_format "
+        "docs/scenario-format.md is stale: python -m scenarios.spec.format "
         "docs/scenario-format.md"
     )
 

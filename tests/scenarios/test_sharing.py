@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.runner import run_scenario
-from scenarios.sharing import SegmentPublisher
-from scenarios.testbench import Testbench
+from scenarios.bench.runner import run_scenario
+from scenarios.bench.sharing import SegmentPublisher
+from scenarios.bench.testbench import Testbench
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
 
 
 def test_publisher_sends_each_segment_map_once_per_pass_and_changes_nothing():

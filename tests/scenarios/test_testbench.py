@@ -8,10 +8,10 @@ import shapely
 
 from robots.safety import FieldSet
 from scenarios import Testbench, bundled_scenarios
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.policies import FieldReadings, FieldView, counted_occupancy
-from scenarios.runner import run_scenario
+from scenarios.bench.policies import FieldReadings, FieldView, counted_occupancy
+from scenarios.bench.runner import run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
 from semistatic.errors import MEMORY
 from tests.scenarios.tiny_world import write_tiny
 from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec

@@ -8,11 +8,11 @@ import math
 import pytest
 
 from scenarios.cli import main
-from scenarios.load import load_scenario
-from scenarios.tune_metrics import METRICS, NEES_TARGET, TIMING_COLUMNS
-from scenarios.tune_points import MAX_POINTS, parse_grid, parse_grids, parse_seeds, sweep_points
-from scenarios.tune_run import PointResult, run_sweep
-from scenarios.tune_table import combine_seeds, format_ranking, rank, sweep_row, write_sweep
+from scenarios.spec.load import load_scenario
+from scenarios.tuning.metrics import METRICS, NEES_TARGET, TIMING_COLUMNS
+from scenarios.tuning.points import MAX_POINTS, parse_grid, parse_grids, parse_seeds, sweep_points
+from scenarios.tuning.run import PointResult, run_sweep
+from scenarios.tuning.table import combine_seeds, format_ranking, rank, sweep_row, write_sweep
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
@@ -282,7 +282,7 @@ def test_runs_that_raise_are_recorded_and_the_exit_status_says_so(
     def broken_run(spec, **_):
         raise RuntimeError(f"no triangulation with gate {spec.mapper.gate}")
 
-    monkeypatch.setattr("scenarios.runner.run_scenario", broken_run)
+    monkeypatch.setattr("scenarios.bench.runner.run_scenario", broken_run)
     scenario = write_tiny(tmp_path)
     out = tmp_path / "out"
     status, stdout, _ = run_cli(capsys, "tune", scenario, "--grid", "mapper.gate=0.1,0.2",

@@ -5,16 +5,16 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.load import load_scenario
-from scenarios.outputs import summarize
-from scenarios.recording import (
+from scenarios.bench.runner import run_scenario
+from scenarios.logs.recording import (
     FORMAT_VERSION,
     ScanRecorder,
     motion_changes,
     read_recording,
     replay,
 )
-from scenarios.runner import run_scenario
+from scenarios.results.outputs import summarize
+from scenarios.spec.load import load_scenario
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 

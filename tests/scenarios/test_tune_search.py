@@ -12,10 +12,10 @@ import time
 import optuna
 import pytest
 
-from scenarios.load import load_scenario
-from scenarios.tune_metrics import TIMING_COLUMNS
-from scenarios.tune_params import parse_param, parse_params
-from scenarios.tune_run import PoolBackend, RayBackend
+from scenarios.spec.load import load_scenario
+from scenarios.tuning.metrics import TIMING_COLUMNS
+from scenarios.tuning.params import parse_param, parse_params
+from scenarios.tuning.run import PoolBackend, RayBackend
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
@@ -226,9 +226,9 @@ def test_ray_tasks_give_the_pool_results(tiny):
 def test_a_trial_spans_every_recorded_scenario_and_ranks_by_mean_and_worst_case(
     tmp_path, capsys
 ):
-    from scenarios.outputs import summarize
-    from scenarios.recording import ScanRecorder
-    from scenarios.runner import run_scenario
+    from scenarios.bench.runner import run_scenario
+    from scenarios.logs.recording import ScanRecorder
+    from scenarios.results.outputs import summarize
     from tests.scenarios.tiny_world import TINY_SCENARIO
 
     first = write_tiny(tmp_path)

@@ -1,0 +1,1 @@
+"""Process plumbing: worker pools, progress lines and staged output directories."""

@@ -1,0 +1,263 @@
+"""Paper Fig. 4: the polygonal local maps over the ground truth of the world.
+
+See :mod:`scenarios.results.figures` for the conventions every figure follows.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from numpy.typing import ArrayLike
+
+from scenarios.results.figures._common import (
+    _counted,
+    _heading,
+    _output_path,
+    _polyline_points,
+    _poses,
+    _write_png,
+)
+from worlds.checks import build_spline
+from worlds.plot import draw_box, draw_posts, draw_walls, figure_size
+from worlds.spec import WorldSpec
+
+__all__ = ["plot_polygonal_map"]
+
+MAP_STATUSES = ("confirmed", "new", "blank")
+"""Life-cycle states of a map polyline, in the order the legend lists them."""
+
+STATUS_STYLE: dict[str, dict[str, Any]] = {
+    # Confirmed polylines are the bulk of a map; new ones (semi-static objects just seen)
+    # and blank ones (missed while they should have been visible) are what a reader looks
+    # for, so they get the loud colours and blank ones a dashed, hollow look.
+    "confirmed": {"color": "tab:blue", "lw": 1.8, "ls": "-", "mfc": "tab:blue", "zorder": 8},
+    "new": {"color": "tab:red", "lw": 2.2, "ls": "-", "mfc": "tab:red", "zorder": 9},
+    "blank": {"color": "tab:gray", "lw": 1.6, "ls": "--", "mfc": "white", "zorder": 7},
+}
+
+MAP_COLORS = {
+    "wall": "0.82",
+    "path": "0.45",
+    "post": "0.25",
+    "trajectory": "black",
+    "estimate": "tab:orange",
+}
+
+PATH_SAMPLE_SPACING = 0.02
+"""Spacing (m) of the points that draw the planned spline path."""
+
+
+def _check_map_polylines(map_polylines: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    checked = []
+    for index, polyline in enumerate(map_polylines):
+        where = f"map_polylines[{index}]"
+        if not isinstance(polyline, Mapping):
+            raise ValueError(
+                f"{where}: expected a dict with 'points' and 'status', got {polyline!r}"
+            )
+        for key in ("points", "status"):
+            if key not in polyline:
+                raise ValueError(f"{where}: missing key {key!r}")
+        status = polyline["status"]
+        if status not in STATUS_STYLE:
+            raise ValueError(f"{where}.status: must be one of {MAP_STATUSES}, got {status!r}")
+        points = _polyline_points(polyline["points"], f"{where}.points")
+        checked.append({"points": points, "status": status})
+    return checked
+
+
+def _draw_path(ax: Axes, world: WorldSpec) -> None:
+    """Draw the planned path thinly, with segment boundaries and names."""
+    spline = build_spline(world.path)
+    samples = max(2, math.ceil(spline.length / PATH_SAMPLE_SPACING) + 1)
+    ax.plot(
+        *spline.point(np.linspace(0.0, spline.length, samples)).T,
+        color=MAP_COLORS["path"],
+        lw=1.0,
+        ls=":",
+        zorder=5,
+    )
+    for segment in world.path.segments:
+        start_s = float(spline.knot_s[segment.start_knot])
+        end_s = float(spline.knot_s[segment.end_knot])
+        boundary = spline.pose(start_s)
+        tick = 0.25 * np.array([-np.sin(boundary[2]), np.cos(boundary[2])])
+        ax.plot(
+            *np.stack([boundary[:2] - tick, boundary[:2] + tick]).T,
+            color=MAP_COLORS["path"],
+            lw=1.2,
+            zorder=5,
+        )
+        middle = spline.pose(0.5 * (start_s + end_s))
+        normal = np.array([-np.sin(middle[2]), np.cos(middle[2])])
+        ax.annotate(
+            segment.name,
+            middle[:2] + 0.45 * normal,
+            ha="center",
+            va="center",
+            fontsize=7,
+            color="0.3",
+            bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 0.5},
+            zorder=6,
+        )
+
+
+def plot_polygonal_map(
+    world: WorldSpec,
+    map_polylines: Sequence[Mapping[str, Any]],
+    path: str | os.PathLike[str],
+    *,
+    truth_outlines: Mapping[str, ArrayLike] | None = None,
+    trajectory: ArrayLike | None = None,
+    estimate: ArrayLike | None = None,
+    trajectories: Mapping[str, ArrayLike] | None = None,
+    title: str = "",
+) -> Path:
+    """Draw the polygonal map over the world and the ground truth, as in Fig. 4 (b)/(d).
+
+    Walls are light grey, reflective posts blue discs, the true box outlines dashed
+    brown with their names, the planned path dotted with its segments, the true
+    trajectory black and the EKF estimate dashed orange. The map polylines go on top,
+    coloured by life-cycle status (confirmed blue, new red, blank dashed grey), with
+    their vertices marked.
+
+    Parameters
+    ----------
+    world
+        The environment (walls, posts, path).
+    map_polylines
+        Dicts ``{"points": (N, 2) world frame, "status": "new" | "confirmed" | "blank",
+        "segment": str, "id": int}``; only ``points`` and ``status`` are drawn, other keys
+        are ignored.
+    path
+        Where to write the PNG (``*.png``).
+    truth_outlines
+        Box name -> ``(4, 2)`` footprint corners where the box really stood.
+    trajectory, estimate
+        ``(N, 3)`` true and EKF poses ``(x, y, theta)`` (``(N, 2)`` positions also work).
+    trajectories
+        Vehicle name -> ``(N, 3)`` true poses: a fleet's vehicles, one colour each.
+    title
+        First line of the figure title, in place of the default that says what it shows.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If a polyline lacks ``points``/``status`` or has an unknown status, or an array
+        has the wrong shape.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from worlds.load import load_world
+    >>> wall = {"points": [[0.0, 1.0], [4.0, 1.0]], "status": "confirmed", "id": 0}
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     plot_polygonal_map(load_world("sim1"), [wall], Path(tmp) / "map.png").name
+    'map.png'
+    >>> plot_polygonal_map(load_world("sim1"), [{**wall, "status": "old"}], "/tmp/x.png")
+    Traceback (most recent call last):
+    ...
+    ValueError: map_polylines[0].status: must be one of ('confirmed', 'new', 'blank'), \
+got 'old'
+    """
+    path = _output_path(path)
+    polylines = _check_map_polylines(map_polylines)
+    outlines = {
+        str(name): _polyline_points(corners, f"truth_outlines[{name!r}]", 3)
+        for name, corners in (truth_outlines or {}).items()
+    }
+    tracks = {
+        key: _poses(poses, key)
+        for key, poses in (("trajectory", trajectory), ("estimate", estimate))
+        if poses is not None
+    }
+
+    fleet = {
+        str(name): _poses(poses, f"trajectories[{name!r}]")
+        for name, poses in (trajectories or {}).items()
+    }
+
+    fig = Figure(figsize=figure_size(world))
+    ax = fig.subplots()
+    draw_walls(ax, world.walls, color=MAP_COLORS["wall"])
+    draw_posts(ax, world.posts, color=MAP_COLORS["post"])
+    for name, corners in outlines.items():
+        draw_box(ax, corners, name, outline=True)
+    _draw_path(ax, world)
+    handles: list[Any] = [
+        Patch(color=MAP_COLORS["wall"], label="wall"),
+        Line2D([], [], ls="", marker="o", color=MAP_COLORS["post"], label="reflective post"),
+        Line2D([], [], color=MAP_COLORS["path"], ls=":", label="planned path, segments"),
+    ]
+    if outlines:
+        handles.append(
+            Patch(
+                facecolor=(0.55, 0.34, 0.29, 0.15),
+                edgecolor="tab:brown",
+                ls="--",
+                label="true box outline",
+            )
+        )
+    track_styles = {
+        "trajectory": {"color": MAP_COLORS["trajectory"], "ls": "-", "label": "true trajectory"},
+        "estimate": {"color": MAP_COLORS["estimate"], "ls": "--", "label": "EKF estimate"},
+    }
+    for key, poses in tracks.items():
+        (line,) = ax.plot(*poses[:, :2].T, lw=1.0, zorder=6, **track_styles[key])
+        ax.plot(*poses[0, :2], "o", color=line.get_color(), ms=5, zorder=6)
+        handles.append(line)
+    for index, (name, poses) in enumerate(fleet.items()):
+        (line,) = ax.plot(*poses[:, :2].T, lw=1.0, zorder=6, color=f"C{index % 10}",
+                          label=f"{name}: true trajectory")
+        ax.plot(*poses[0, :2], "o", color=line.get_color(), ms=5, zorder=6)
+        handles.append(line)
+
+    counts = dict.fromkeys(MAP_STATUSES, 0)
+    for polyline in polylines:
+        style = STATUS_STYLE[polyline["status"]]
+        ax.plot(*polyline["points"].T, marker="o", ms=3.5, mec=style["color"], **style)
+        counts[polyline["status"]] += 1
+    for status in MAP_STATUSES:
+        style = STATUS_STYLE[status]
+        handles.append(
+            Line2D(
+                [],
+                [],
+                marker="o",
+                ms=3.5,
+                mec=style["color"],
+                label=f"map: {status} ({counts[status]})",
+                **{k: v for k, v in style.items() if k != "zorder"},
+            )
+        )
+
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    summary = ", ".join(f"{counts[status]} {status}" for status in MAP_STATUSES)
+    ax.set_title(
+        _heading(
+            title,
+            f"polygonal map of {world.name}",
+            f"{_counted(len(polylines), 'map polyline')}: {summary}",
+        ),
+        fontsize=10,
+    )
+    return _write_png(fig, path)

@@ -1,0 +1,1 @@
+"""Scenario data: the spec, files and their checks, per-lap layouts, routes and segments."""

@@ -1,0 +1,319 @@
+"""What a scenario file describes, as frozen dataclasses (no I/O, no simulator).
+
+A scenario is one experiment: a world, a robot preset, how many laps, the seed, the sensor
+rates and noise, the box moves between laps, which people walk, the mapper thresholds
+and the safety-field policy. ``scenarios.spec.load`` builds these from TOML with the same
+validation layer as the worlds (unknown keys rejected with a suggestion, file and key
+named in every error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from semistatic.errors import MEMORY, SpecError
+from semistatic.params import MapperParams
+from semistatic.validation import bounds, check_fields, or_object, safe_name
+from worlds.spec import BOX_SIZE, COORDINATE
+
+__all__ = [
+    "BOX_ACTIONS",
+    "POLICIES",
+    "BoxMove",
+    "Noise",
+    "Rates",
+    "SafetySettings",
+    "ScenarioSpec",
+    "VehicleSpec",
+]
+
+MAX_LAPS = 1000
+"""Laps of one run: 1000 laps of a 10 m path are about 10 km, a few days of driving."""
+
+MAX_SEED = 2**63 - 1
+"""Largest seed (a 64-bit signed integer, what every tool around us can store)."""
+
+MAX_LAP_TIMEOUT = 3600.0
+"""Longest lap timeout (s): a lap of a bundled path takes 25-60 s."""
+
+MAX_START_TIME = 3600.0
+"""Latest start of a fleet vehicle (s): an hour of the others driving alone."""
+
+POLICIES = ("conservative", "adaptive")
+BOX_ACTIONS = ("move", "add", "remove")
+
+
+@dataclass(frozen=True)
+class Rates:
+    """Update rates in Hz. Physics steps at ``physics_hz``; everything else is scheduled on it.
+
+    The defaults follow DESIGN.md: 240 Hz physics, 50 Hz control, a 25 Hz localization laser
+    (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300, 80 ms scan time). With the
+    ``pioneer3dx`` preset one LMS100 serves both roles; each role then uses its own rate.
+
+    Parameters
+    ----------
+    physics_hz
+        Physics steps per second (Hz); every other rate is scheduled on it.
+    control_hz
+        Follower commands per second (Hz).
+    localization_hz
+        Scans of the localization laser per second (Hz).
+    safety_hz
+        Scans of the safety laser per second (Hz); each also updates the map.
+    """
+
+    physics_hz: float = field(default=240.0, metadata=bounds(ge=60.0, le=2000.0))
+    control_hz: float = field(default=50.0, metadata=bounds(gt=0.0, le=500.0))
+    localization_hz: float = field(default=25.0, metadata=bounds(gt=0.0, le=100.0))
+    safety_hz: float = field(default=12.5, metadata=bounds(gt=0.0, le=100.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        for name in ("control_hz", "localization_hz", "safety_hz"):
+            if getattr(self, name) > self.physics_hz:
+                raise SpecError(
+                    MEMORY, name, f"must not exceed physics_hz ({self.physics_hz:g} Hz)"
+                )
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Scale factors on the robot preset's noise models (1.0 = the data-sheet values).
+
+    Parameters
+    ----------
+    odometry
+        Factor on the wheel-encoder slip noise (0 = noise-free odometry).
+    range
+        Factor on the lasers' range noise (0 = exact ranges).
+    """
+
+    odometry: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+    range: float = field(default=1.0, metadata=bounds(ge=0.0, le=100.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """The safety supervisor and the field policy.
+
+    ``slowdown`` is the speed factor while the warning field is occupied; the protective
+    field stops the robot. ``release_delay`` (s) keeps the reaction after the field clears.
+    ``min_points`` readings must fall in a field before it counts (one noisy beam is
+    ignored). Under the ``adaptive`` policy, readings within ``adaptive_margin`` (m) of a
+    known semi-static object of the current segment no longer count. Whatever the policy,
+    every reading in the vehicle's stop envelope counts (the footprint swept over the
+    stopping distance at the measured speed, at least ``min_protective_depth`` ahead,
+    grown by ``general_supplement`` on every side; :mod:`scenarios.bench.policies`).
+
+    Parameters
+    ----------
+    slowdown
+        Speed factor while the warning field is occupied.
+    release_delay
+        Time (s) a reaction lasts after its field clears.
+    min_points
+        Readings that must fall in a field before it counts.
+    adaptive_margin
+        Distance (m) from a known object within which readings no longer count (adaptive).
+    min_protective_depth
+        Least reach (m) of the stop envelope ahead of the footprint, even at standstill.
+    general_supplement
+        Margin (m) around the swept footprint in which a reading stops the vehicle
+        whatever the policy (a scanner's measurement error; Sick's manuals use 0.1 m).
+    """
+
+    slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
+    release_delay: float = field(default=0.5, metadata=bounds(ge=0.0, le=10.0))
+    min_points: int = field(default=3, metadata=bounds(ge=1, le=100))
+    adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
+    min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
+    general_supplement: float = field(default=0.10, metadata=bounds(ge=0.0, le=1.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class BoxMove:
+    """A change to the semi-static boxes before lap ``lap`` starts (laps count from 1).
+
+    ``action`` is ``move`` (needs ``pose``), ``add`` (needs ``pose`` and ``size``) or
+    ``remove``. Moves happen while the robot is back at the start, i.e. not observing.
+
+    Parameters
+    ----------
+    lap
+        The lap before which the change happens (2 or later).
+    action
+        ``move``, ``add`` or ``remove``.
+    box
+        Name of the box (a new name for ``add``).
+    pose
+        ``[x, y, yaw]`` of the box centre (m, m, rad), for ``move`` and ``add``.
+    size
+        ``[sx, sy, sz]`` edges of the box (m); required for ``add``, optional for ``move``.
+    """
+
+    lap: int = field(metadata=bounds(ge=2, le=MAX_LAPS))
+    action: str
+    box: str = field(metadata=safe_name())
+    pose: tuple[float, float, float] | None = field(default=None, metadata=COORDINATE)
+    size: tuple[float, float, float] | None = field(default=None, metadata=BOX_SIZE)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.action not in BOX_ACTIONS:
+            raise SpecError(MEMORY, "action", f"must be one of {', '.join(BOX_ACTIONS)}")
+        if self.action in ("move", "add") and self.pose is None:
+            raise SpecError(MEMORY, "pose", f"'{self.action}' needs pose = [x, y, yaw]")
+        if self.action == "add" and self.size is None:
+            raise SpecError(MEMORY, "size", "'add' needs size = [sx, sy, sz]")
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """One vehicle of a fleet (array of tables ``[[vehicles]]``).
+
+    Every vehicle drives a route through the world's path segments with its own sensors,
+    encoders, EKF, follower, safety supervisor, local maps and random streams. Its laps
+    start and end where it starts: at the start of segment ``start_segment`` (a start
+    offset along the route, so a closed route can carry vehicles spread round the loop)
+    or of the first segment of ``route``. It stands there until ``start_time``.
+
+    Parameters
+    ----------
+    name
+        Name of the vehicle (a key of ``metrics.json``'s ``vehicles``).
+    robot
+        Robot preset (default: the scenario's ``robot``).
+    start_segment
+        Name of the path segment at whose start the vehicle starts (default: the first).
+    route
+        Names of the world's path segments the vehicle drives, in driving order, each
+        starting where the one before ends (default: the whole path). Every segment of a
+        closed path makes a closed loop driven lap after lap; fewer make an open route,
+        after which the vehicle is carried back to its start like on an open path. Give
+        ``route`` or ``start_segment``, not both.
+    start_time
+        Simulated time (s) until which the vehicle stands at its start; its first lap
+        starts then.
+
+    Examples
+    --------
+    >>> VehicleSpec("lgv2", start_segment="north_east").robot
+    ''
+    >>> VehicleSpec("lgv3", route=("east", "north_east"), start_time=20.0).route
+    ('east', 'north_east')
+    >>> VehicleSpec("lgv3", start_time=-1.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: start_time: ...
+    >>> VehicleSpec("lgv 2")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: name: ...
+    """
+
+    name: str = field(metadata=safe_name())
+    robot: str = ""
+    start_segment: str = ""
+    route: tuple[str, ...] = ()
+    start_time: float = field(default=0.0, metadata=bounds(ge=0.0, le=MAX_START_TIME))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.route and self.start_segment:
+            raise SpecError(MEMORY, "start_segment",
+                            "give route (its first segment is the start) or start_segment, "
+                            "not both")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """One experiment. ``world`` is a bundled world name or a path (relative to the file).
+
+    Parameters
+    ----------
+    name
+        Name of the experiment (default: the file's stem); results go to
+        ``results/NAME``, so it is a plain name, not a path.
+    world
+        A bundled world name or a ``.toml`` path, relative to the scenario file.
+    robot
+        Robot preset: ``pioneer3dx`` or ``lgv``.
+    laps
+        Laps to drive.
+    seed
+        Seed of every random stream (noise, people).
+    policy
+        Safety-field policy: ``conservative`` or ``adaptive`` (in code, also a
+        ``scenarios.bench.policies.FieldPolicy`` object).
+    description
+        Free text.
+    people
+        Names of the world's people to switch on.
+    lap_timeout
+        Simulated time (s) after which a lap that has not reached the path end fails.
+    sharing
+        Publish each segment's local map to a fleet map store when the vehicle leaves
+        the segment, and report the traffic (``metrics.json`` key ``sharing``).
+    rates
+        Update rates (table ``[rates]``).
+    noise
+        Noise scale factors (table ``[noise]``).
+    safety
+        Safety supervisor and field policy (table ``[safety]``).
+    mapper
+        Mapper thresholds (table ``[mapper]``).
+    moves
+        Box changes between laps (array of tables ``[[moves]]``).
+    vehicles
+        The vehicles of a fleet (array of tables ``[[vehicles]]``); none: one vehicle,
+        ``robot``, starting at the path start. With several vehicles, a lap's box moves
+        happen when the first vehicle starts that lap; a vehicle is a dynamic obstacle
+        for the others (their lasers see it, their protective fields stop for it, their
+        mappers leave it out).
+    source
+        Set by the loader to the file read; not a key of the file.
+    """
+
+    name: str = field(metadata=safe_name())
+    world: str
+    robot: str = "pioneer3dx"
+    laps: int = field(default=5, metadata=bounds(ge=1, le=MAX_LAPS))
+    seed: int = field(default=0, metadata=bounds(ge=0, le=MAX_SEED))
+    # In code, also a scenarios.bench.policies.FieldPolicy object.
+    policy: str = field(default="conservative", metadata=or_object())
+    description: str = ""
+    people: tuple[str, ...] = ()
+    lap_timeout: float = field(default=120.0, metadata=bounds(gt=0.0, le=MAX_LAP_TIMEOUT))
+    sharing: bool = False
+    rates: Rates = field(default_factory=Rates)
+    noise: Noise = field(default_factory=Noise)
+    safety: SafetySettings = field(default_factory=SafetySettings)
+    mapper: MapperParams = field(default_factory=MapperParams)
+    moves: tuple[BoxMove, ...] = ()
+    vehicles: tuple[VehicleSpec, ...] = ()
+    source: str = MEMORY
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        # A policy object (scenarios.bench.policies.FieldPolicy) is checked when a run starts.
+        if isinstance(self.policy, str) and self.policy not in POLICIES:
+            raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")
+        for index, move in enumerate(self.moves):
+            if move.lap > self.laps:
+                raise SpecError(
+                    MEMORY,
+                    f"moves[{index}].lap",
+                    f"lap {move.lap} never runs with laps = {self.laps}",
+                )
+        names = [vehicle.name for vehicle in self.vehicles]
+        for index, name in enumerate(names):
+            if name in names[:index]:
+                raise SpecError(MEMORY, f"vehicles[{index}].name",
+                                f"vehicle {name!r} is named twice; give each a name of its own")

@@ -1,0 +1,1 @@
+"""Threshold tuning: grid sweeps, Optuna searches over recordings, pool and Ray backends."""
