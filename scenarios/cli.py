@@ -500,7 +500,3 @@ def console_main(argv: Sequence[str] | None = None) -> None:
         sys.stderr.flush()
         os._exit(status)
     sys.exit(status)
-
-
-if __name__ == "__main__":
-    console_main()

@@ -121,7 +121,7 @@ def _start(args: list[str], out: Path, cwd: Path) -> subprocess.Popen:
     # hide whether they stop with their parent on their own.
     with open(cwd / "stdout.txt", "w") as stdout:
         return subprocess.Popen(
-            [sys.executable, "-m", "scenarios.cli", *args, "--out", str(out)],
+            [sys.executable, "-m", "scenarios", *args, "--out", str(out)],
             cwd=cwd, stdout=stdout, stderr=subprocess.PIPE, text=True,
             preexec_fn=_interruptible,
         )
@@ -210,7 +210,7 @@ def test_sigkill_leaves_no_process_and_the_next_command_cleans_up(tmp_path, kind
     # A staging directory a killed run left behind (it may have been killed mid-write).
     (tmp_path / f".results.staging-{_dead_pid()}-x").mkdir()
     check = subprocess.run(
-        [sys.executable, "-m", "scenarios.cli", "check", "sim1", "--out", str(out)],
+        [sys.executable, "-m", "scenarios", "check", "sim1", "--out", str(out)],
         cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S,
     )
     assert check.returncode == 0, check.stderr

@@ -152,7 +152,7 @@ def test_search_writes_the_pareto_front_and_refuses_another_search_on_its_study(
 
 # ------------------------------------------------------------------ resume after SIGKILL
 def _search_command(scenario, out):
-    return [sys.executable, "-m", "scenarios.cli", "tune", str(scenario), "--laps", "1",
+    return [sys.executable, "-m", "scenarios", "tune", str(scenario), "--laps", "1",
             "--param", "mapper.gate=0.05:0.3", "--objective", "f1", "--trials", str(TRIALS),
             "--no-figures", "--out", str(out)]
 
