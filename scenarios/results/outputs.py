@@ -23,6 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.bench.ground_truth import detection_scores
+from scenarios.bench.policies import policy_name
+from scenarios.bench.records import LapLog, RunLog
+from scenarios.process.staging import stage_and_publish
 from scenarios.results.figures import (
     plot_detection_scores,
     plot_ekf_corrections,
@@ -31,16 +35,7 @@ from scenarios.results.figures import (
     plot_sharing_traffic,
     plot_tangent_histograms,
 )
-from scenarios.results.metrics import (
-    detection_scores,
-    ekf_correction_metrics,
-    localization_metrics,
-    table1_cm,
-)
-from scenarios.process.staging import stage_and_publish
-from scenarios.bench.policies import policy_name
-from scenarios.bench.records import LapLog
-from scenarios.bench.runner import RunLog
+from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
 
 __all__ = [
     "PAPER_TABLE1",
