@@ -4,7 +4,7 @@ A run's noise comes from one :class:`numpy.random.SeedSequence` built from the s
 each component (a laser, the wheel encoders, a person, a user's script) draws from its
 own child sequence, keyed by the component's *name* rather than by the order in which
 components were created. Adding a sensor, or drawing more numbers in one component,
-therefore leaves every other component's noise unchanged (DESIGN.md "Conventions",
+therefore leaves every other component's noise unchanged (docs/design.md, conventions;
 STYLE.md habit 16), and the same seed gives the same streams.
 
 Examples

@@ -1,4 +1,4 @@
-"""The layering of DESIGN.md: algorithm packages never import the simulator."""
+"""The layering of docs/design.md: algorithm packages never import the simulator."""
 
 import ast
 from pathlib import Path

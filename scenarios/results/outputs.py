@@ -1,4 +1,4 @@
-"""Turn a run log into the output directory of DESIGN.md (a contract, extend only).
+"""Turn a run log into the output directory of docs/design.md (a contract, extend only).
 
 ::
 
@@ -99,7 +99,7 @@ def detection_metrics(laps: Sequence[LapLog]) -> dict[str, Any]:
 
 
 def summarize(log: RunLog) -> dict[str, Any]:
-    """Return the ``metrics.json`` content of a run (DESIGN.md keys, and more)."""
+    """Return the ``metrics.json`` content of a run (docs/design.md keys, and more)."""
     spec = log.spec
     laps = log.laps
     localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)

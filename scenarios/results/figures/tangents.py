@@ -88,7 +88,7 @@ def plot_tangent_histograms(
     score = similarity(polylines[0], polylines[1])
     lengths = [float(np.sum(np.hypot(*np.diff(p, axis=0).T))) for p in polylines]
     (breaks0, angles0), (breaks1, angles1) = tangents
-    # theta_0 is the mean of T1 - T0 over s (DESIGN.md detail 4).
+    # theta_0 is the mean of T1 - T0 over s (docs/design.md#detail-4).
     theta_0 = float(np.diff(breaks1) @ angles1 - np.diff(breaks0) @ angles0)
 
     fig = Figure(figsize=(10.5, 7.0), layout="constrained")
