@@ -73,6 +73,18 @@ class LaserSpec:
         1-sigma noise added to the remission of the hit surface.
     dropout_prob
         Probability that a beam returns nothing (reported as ``inf``).
+    multiple_sampling
+        Consecutive scans an object must interrupt a safety field before the field
+        triggers (a safety scanner's multiple sampling; 2 is Sick's minimum). The
+        scanner's response time is this many scan periods
+        (:func:`robots.stopping.response_time`).
+    general_supplement
+        Supplement for general measurement errors added to a protective field's length
+        and to each side of its width (m; Sick's ``Z_G``).
+    reflector_supplement, reflector_range
+        Supplement for reflection-related measurement errors (m; Sick's ``Z_R``), added
+        like ``general_supplement`` when a retroreflector is within ``reflector_range``
+        (m) of the protective field's boundary.
 
     Examples
     --------
@@ -112,6 +124,13 @@ class LaserSpec:
         metadata=bounds(ge=0.0, le=1.0, fix="on the [0, 1] remission scale, e.g. 0.02")
     )
     dropout_prob: float = field(metadata=bounds(ge=0.0, lt=1.0, fix="a probability, e.g. 0"))
+    multiple_sampling: int = field(default=2, metadata=bounds(ge=1, le=16, fix="scans, e.g. 2"))
+    general_supplement: float = field(default=0.1, metadata=bounds(ge=0.0, le=1.0,
+                                                                   fix="metres, e.g. 0.1"))
+    reflector_supplement: float = field(default=0.2, metadata=bounds(ge=0.0, le=1.0,
+                                                                     fix="metres, e.g. 0.2"))
+    reflector_range: float = field(default=1.0, metadata=bounds(ge=0.0, le=10.0,
+                                                                fix="metres, e.g. 1.0"))
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -176,7 +195,10 @@ technical data): aperture angle 270 deg; angular resolution 0.25 deg / 0.5 deg
 (0.5 deg used, 541 beams); scanning frequency 25 Hz / 50 Hz (50 Hz used, 0.5 deg goes
 with 50 Hz); operating range 0.5 m to 20 m; statistical error (1 sigma) +-12 mm;
 systematic error +-30 mm. The data sheet gives no intensity noise figure: 0.02 on the
-``[0, 1]`` remission scale is our choice, and dropouts are off by default.
+``[0, 1]`` remission scale is our choice, and dropouts are off by default. The LMS100 is
+no safety scanner; where it guards a vehicle (the Pioneer) we give it a safety
+scanner's settings: multiple sampling 2 and Sick's S300 supplements (100 mm general,
+200 mm near reflectors within 1 m).
 """
 
 S300 = LaserSpec(
@@ -203,4 +225,7 @@ choice, inside the 100 mm general measurement-error supplement the manual asks t
 to protective fields; no systematic bias, no intensity output on the real device
 (0.02 remission noise is ours so the scan carries comparable intensities), minimum
 range 0.05 m is ours (the scanner has no blind zone specification beyond its housing).
+Safety settings from the operating instructions: multiple sampling 2 (its minimum, with
+the 80 ms basic response time), general supplement ``Z_G`` 100 mm, reflector supplement
+``Z_R`` 200 mm with retroreflectors closer than 1 m to the protective field.
 """

@@ -296,6 +296,10 @@ class SafetyPolicy:
         scanner's restart delay, which also bridges flicker at a field's edge.
     min_points
         Points a field needs to trigger (>= 1), see ``field_occupancy``.
+    multiple_sampling
+        Consecutive scans with a field occupied before it triggers (>= 1): a safety
+        scanner's multiple sampling, which filters single-scan flicker at the price of
+        response time.
 
     Examples
     --------
@@ -310,6 +314,7 @@ class SafetyPolicy:
     warning_speed_scale: float = 0.5
     release_delay: float = 0.5
     min_points: int = 3
+    multiple_sampling: int = 1
 
     def __post_init__(self) -> None:
         if not 0.0 < self.warning_speed_scale <= 1.0:
@@ -322,14 +327,10 @@ class SafetyPolicy:
                 "SafetyPolicy: release_delay must be >= 0 s (the hold time), "
                 f"got {self.release_delay}"
             )
-        if (
-            isinstance(self.min_points, bool)
-            or int(self.min_points) != self.min_points
-            or self.min_points < 1
-        ):
-            raise ValueError(
-                f"SafetyPolicy: min_points must be an integer >= 1, got {self.min_points}"
-            )
+        for name in ("min_points", "multiple_sampling"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or int(value) != value or value < 1:
+                raise ValueError(f"SafetyPolicy: {name} must be an integer >= 1, got {value}")
 
 
 class SafetyOutput(NamedTuple):
@@ -342,8 +343,9 @@ class SafetyOutput(NamedTuple):
 class SafetySupervisor:
     """Turn each safety scan's field occupancy into a speed scale, with release delay.
 
-    A zone is entered as soon as a scan triggers it and left only once no scan has
-    triggered it for ``policy.release_delay`` seconds. Events, not ticks, are counted:
+    A field triggers when ``policy.multiple_sampling`` consecutive scans occupy it; its
+    zone is entered then and left only once no scan has triggered it for
+    ``policy.release_delay`` seconds. Events, not ticks, are counted:
     ``stops`` counts entries into the protective zone, ``slowdowns`` entries into the
     warning zone from the clear zone (falling back from protective to warning continues
     the same event).
@@ -402,6 +404,7 @@ class SafetySupervisor:
         self.last_occupancy: FieldState | None = None
         self._last_stamp = -math.inf
         self._last_triggered = {"warning": -math.inf, "protective": -math.inf}
+        self._occupied_scans = {"warning": 0, "protective": 0}
 
     def set_fields(self, field_set: FieldSet) -> None:
         """Switch to another segment's fields; a held zone stays held.
@@ -438,11 +441,14 @@ class SafetySupervisor:
             )
         self._last_stamp = stamp
         self.last_occupancy = occupancy
-        # The protective field lies inside the warning field: triggering it triggers both.
-        if occupancy.protective_triggered:
-            self._last_triggered["protective"] = stamp
-        if occupancy.warning_triggered or occupancy.protective_triggered:
-            self._last_triggered["warning"] = stamp
+        # The protective field lies inside the warning field: occupying it occupies both.
+        runs, needed = self._occupied_scans, self.policy.multiple_sampling
+        runs["protective"] = runs["protective"] + 1 if occupancy.protective_triggered else 0
+        runs["warning"] = (runs["warning"] + 1 if occupancy.warning_triggered
+                           or occupancy.protective_triggered else 0)
+        for candidate in ("warning", "protective"):
+            if runs[candidate] >= needed:
+                self._last_triggered[candidate] = stamp
 
         zone = "clear"
         for candidate in ("warning", "protective"):

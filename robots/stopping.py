@@ -1,35 +1,83 @@
-"""How far a vehicle travels before it stands, and where a reading must stop it.
+"""Stopping distances and protective fields sized by the safety standard's formula.
 
-A protective stop is not instant: the vehicle keeps its speed while the scanner sees the
-object and the controller reacts (the *reaction time*), then brakes. With speed ``v``,
-reaction time ``T`` and deceleration ``a`` the stopping distance is
+A protective stop is not instant. From the moment an object enters the protective field
+the vehicle keeps its speed ``v`` while the scanner confirms it (its *response time*:
+``multiple_sampling`` scan periods) and the controller applies the stop (up to one
+control period); then it brakes at ``a``. Its stopping distance is
 
-    S = v T + v^2 / (2 a)
+    S_A = v T + v^2 / (2 a),    T = multiple_sampling * scan_period + control_period
 
-(the stopping-distance part of the protective-field length in SICK's scanner manuals and
-of ISO 13855's ``S = K T + C``). Anything the vehicle could touch before it stands lies
-in its *stop envelope*: the footprint swept ``S`` metres along the direction of travel,
-grown by a supplement on every side. A reading there must stop the vehicle whatever a
-field policy decides (:mod:`scenarios.bench.policies`).
+(Sick's operating instructions for the S300, S3000 and microScan3, "stopping distance"
+of mobile applications; ISO 13855's ``S = K (T_M + T_S) + C`` is the stationary
+machine's form). The protective field must be at least
+
+    S_L = S_A + Z_G + Z_R + Z_F   long (from the vehicle's front),
+    S_B = F_B + 2 (Z_G + Z_R + Z_F)   wide (the vehicle's width F_B plus both sides),
+
+with the supplements for general measurement errors ``Z_G``, for reflection near
+retroreflectors ``Z_R`` and for a lack of ground clearance ``Z_F`` (:class:`Supplements`);
+and it must reach past the scanner's blind zone, or nothing ahead is ever seen.
+Following Sick, the person is assumed to stand still: only the vehicle's speed counts.
 
 Examples
 --------
->>> round(stopping_distance(1.0, reaction_time=0.1, deceleration=1.0), 3)
-0.6
->>> box = [(-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2)]
->>> stop_envelope(box, reach=0.5, supplement=0.1).bounds
-(-0.3, -0.3, 0.8, 0.3)
+>>> model = StopModel(scanner_response_s=0.16, control_period_s=0.02, deceleration=1.0)
+>>> round(model.distance(1.0), 3)          # 0.18 s at 1 m/s, then 0.5 m of braking
+0.68
+>>> supplements = Supplements(general=0.1, reflector=0.2, ground_clearance=0.15)
+>>> [round(value, 3) for value in field_size(model.distance(1.0), supplements, 0.8)]
+[1.13, 1.7]
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-__all__ = ["blind_reach", "stop_envelope", "stopping_distance"]
+__all__ = [
+    "FLAT_GROUND_CLEARANCE",
+    "FLAT_GROUND_SUPPLEMENT",
+    "StopModel",
+    "Supplements",
+    "blind_reach",
+    "field_size",
+    "ground_clearance_supplement",
+    "minimum_protective_field",
+    "required_field",
+    "response_time",
+    "stopping_distance",
+]
+
+FLAT_GROUND_CLEARANCE = 0.12
+"""Ground clearance (m) below which Sick's flat-rate supplement ``Z_F`` applies."""
+
+FLAT_GROUND_SUPPLEMENT = 0.15
+"""Sick's flat-rate supplement ``Z_F`` (m) for a vehicle with less ground clearance:
+a person's foot is detected above the foot, which reaches further under the vehicle."""
+
+
+def response_time(scan_period: float, multiple_sampling: int) -> float:
+    """Return a scanner's response time (s): ``multiple_sampling`` scan periods.
+
+    An object that appears just after a scan is in the next ``multiple_sampling``
+    scans before the field triggers: the worst case.
+
+    Examples
+    --------
+    >>> response_time(0.08, 2)
+    0.16
+    """
+    if not (scan_period > 0.0 and math.isfinite(scan_period)):
+        raise ValueError(f"response_time: scan_period must be > 0 s, got {scan_period}")
+    if isinstance(multiple_sampling, bool) or int(multiple_sampling) != multiple_sampling \
+            or multiple_sampling < 1:
+        raise ValueError(f"response_time: multiple_sampling must be an integer >= 1, "
+                         f"got {multiple_sampling}")
+    return int(multiple_sampling) * float(scan_period)
 
 
 def stopping_distance(speed: float, reaction_time: float, deceleration: float) -> float:
@@ -53,31 +101,101 @@ def stopping_distance(speed: float, reaction_time: float, deceleration: float) -
     return v * reaction_time + v * v / (2.0 * deceleration)
 
 
-def stop_envelope(footprint: ArrayLike, reach: float, supplement: float) -> shapely.Polygon:
-    """Return the robot-frame region in which a reading must stop the vehicle.
+@dataclass(frozen=True)
+class StopModel:
+    """How a vehicle stops: the scanner responds, the controller acts, the vehicle brakes.
 
-    The footprint swept ``reach`` metres along x (negative: reversing), as the convex hull
-    of the footprint at both ends, grown by ``supplement`` metres on every side: what the
-    vehicle could touch before it stands, from the front, the sides or behind. The sweep
-    is straight; on a curve the supplement covers the difference for the short stopping
-    distances of indoor vehicles.
+    Parameters
+    ----------
+    scanner_response_s
+        The safety scanner's response time (s), :func:`response_time`.
+    control_period_s
+        The longest wait until the controller applies a stop (s): one control period.
+    deceleration
+        The braking deceleration (m/s^2): the lower of the follower's limit and what the
+        motors can give.
 
     Examples
     --------
-    >>> box = [(-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2)]
-    >>> round(stop_envelope(box, reach=0.0, supplement=0.1).area, 3)  # standing: a grown box
-    0.351
-    >>> stop_envelope(box, reach=-0.3, supplement=0.0).bounds   # reversing sweeps behind
-    (-0.5, -0.2, 0.2, 0.2)
+    >>> StopModel(0.16, 0.02, 1.0).reaction_time
+    0.18
     """
-    if not (supplement >= 0.0 and math.isfinite(supplement)):
-        raise ValueError(f"stop_envelope: supplement must be >= 0 m, got {supplement}")
-    if not math.isfinite(reach):
-        raise ValueError(f"stop_envelope: reach must be finite, got {reach}")
-    outline = np.asarray(footprint, dtype=float).reshape(-1, 2)
-    swept = np.vstack([outline, outline + np.array([float(reach), 0.0])])
-    hull = shapely.convex_hull(shapely.MultiPoint(swept))
-    return shapely.buffer(hull, supplement) if supplement > 0.0 else hull
+
+    scanner_response_s: float
+    control_period_s: float
+    deceleration: float
+
+    def __post_init__(self) -> None:
+        for name in ("scanner_response_s", "control_period_s"):
+            value = getattr(self, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                raise ValueError(f"StopModel: {name} must be >= 0 s, got {value}")
+        if not (self.deceleration > 0.0 and math.isfinite(self.deceleration)):
+            raise ValueError(f"StopModel: deceleration must be > 0 m/s^2, got {self.deceleration}")
+
+    @property
+    def reaction_time(self) -> float:
+        """Return the time (s) at full speed before braking starts."""
+        return self.scanner_response_s + self.control_period_s
+
+    def distance(self, speed: float) -> float:
+        """Return the stopping distance (m) from ``speed`` (m/s)."""
+        return stopping_distance(speed, self.reaction_time, self.deceleration)
+
+
+def ground_clearance_supplement(ground_clearance: float) -> float:
+    """Return ``Z_F`` (m): Sick's flat rate below 120 mm of ground clearance, else 0.
+
+    Examples
+    --------
+    >>> ground_clearance_supplement(0.06), ground_clearance_supplement(0.15)
+    (0.15, 0.0)
+    """
+    return FLAT_GROUND_SUPPLEMENT if ground_clearance < FLAT_GROUND_CLEARANCE else 0.0
+
+
+@dataclass(frozen=True)
+class Supplements:
+    """The supplements of a protective field (m): ``Z_G``, ``Z_R`` and ``Z_F``.
+
+    ``reflector`` is 0 where no retroreflector is near the field.
+
+    Examples
+    --------
+    >>> round(Supplements(general=0.1, reflector=0.0, ground_clearance=0.15).total, 3)
+    0.25
+    """
+
+    general: float
+    reflector: float
+    ground_clearance: float
+
+    def __post_init__(self) -> None:
+        for name in ("general", "reflector", "ground_clearance"):
+            value = getattr(self, name)
+            if not (value >= 0.0 and math.isfinite(value)):
+                raise ValueError(f"Supplements: {name} must be >= 0 m, got {value}")
+
+    @property
+    def total(self) -> float:
+        """Return ``Z_G + Z_R + Z_F`` (m)."""
+        return self.general + self.reflector + self.ground_clearance
+
+
+def field_size(stopping: float, supplements: Supplements,
+               vehicle_width: float) -> tuple[float, float]:
+    """Return the protective field's least length ``S_L`` and width ``S_B`` (m).
+
+    ``stopping`` is the stopping distance ``S_A`` (m); the length is measured from the
+    vehicle's front.
+
+    Examples
+    --------
+    >>> field_size(0.5, Supplements(0.1, 0.0, 0.0), vehicle_width=0.6)
+    (0.6, 0.8)
+    """
+    total = supplements.total
+    return stopping + total, vehicle_width + 2.0 * total
 
 
 def blind_reach(footprint: ArrayLike, mount_x: float, range_min: float) -> float:
@@ -85,8 +203,7 @@ def blind_reach(footprint: ArrayLike, mount_x: float, range_min: float) -> float
 
     A scanner at ``mount_x`` (robot frame, looking ahead) reports nothing nearer than
     ``range_min``: an object straight ahead is first seen ``mount_x + range_min`` ahead
-    of the axle. A stop envelope that ends before that is never watched; this is the
-    least reach ahead that it needs (0 when the blind zone ends inside the footprint).
+    of the axle (0 when the blind zone ends inside the footprint).
 
     Examples
     --------
@@ -98,3 +215,41 @@ def blind_reach(footprint: ArrayLike, mount_x: float, range_min: float) -> float
     """
     front = float(np.asarray(footprint, dtype=float).reshape(-1, 2)[:, 0].max())
     return max(0.0, float(mount_x) + float(range_min) - front)
+
+
+def required_field(footprint: ArrayLike, length: float, width: float) -> shapely.Polygon:
+    """Return the rectangle a protective field must cover (robot frame).
+
+    From the footprint's front ``length`` metres ahead, ``width`` metres wide and centred
+    on the footprint's lateral extent.
+
+    Examples
+    --------
+    >>> box = [(-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2)]
+    >>> required_field(box, 0.5, 0.8).bounds
+    (0.2, -0.4, 0.7, 0.4)
+    """
+    outline = np.asarray(footprint, dtype=float).reshape(-1, 2)
+    front = float(outline[:, 0].max())
+    centre = 0.5 * float(outline[:, 1].min() + outline[:, 1].max())
+    return shapely.box(front, centre - 0.5 * width, front + length, centre + 0.5 * width)
+
+
+def minimum_protective_field(footprint: ArrayLike, length: float, width: float,
+                             general_supplement: float) -> shapely.Geometry:
+    """Return the field no field policy may shrink: ahead, beside and behind the vehicle.
+
+    The rectangle the standard's formula asks for at the current speed
+    (:func:`required_field`), together with the footprint grown by the general
+    supplement on every side: what the vehicle could touch before it stands, from the
+    front, the sides or behind.
+
+    Examples
+    --------
+    >>> box = [(-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2)]
+    >>> minimum_protective_field(box, 0.5, 0.8, 0.1).bounds
+    (-0.3, -0.4, 0.7, 0.4)
+    """
+    outline = np.asarray(footprint, dtype=float).reshape(-1, 2)
+    around = shapely.buffer(shapely.Polygon(outline), general_supplement)
+    return shapely.union(required_field(outline, length, width), around)

@@ -1,45 +1,52 @@
-"""A vehicle's safety fields at work: the field policy, the stop envelope, the supervisor.
+"""A vehicle's safety fields at work: the field policy, the minimum field, the supervisor.
 
 At every safety scan :class:`VehicleFields` asks the vehicle's field policy which readings
-count (:mod:`scenarios.bench.policies`), adds every reading inside the stop envelope at
-the speed the wheel encoders measured since the last scan (:mod:`robots.stopping`), and
-feeds the counts to the :class:`~robots.safety.SafetySupervisor`, whose zone becomes the
-follower's speed scale.
+count (:mod:`scenarios.bench.policies`), adds every reading inside the *minimum
+protective field*, and feeds the counts to the :class:`~robots.safety.SafetySupervisor`,
+whose zone becomes the follower's speed scale. With ``safety.minimum_field =
+"standard"`` the minimum field is what the standard's formula asks for at the speed the
+wheel encoders measured since the last scan (:func:`robots.stopping.minimum_protective_field`
+with the segment's supplements, :mod:`scenarios.spec.field_sizing`): ahead, beside and
+behind the vehicle. With ``"fixed"`` it is the first ``safety.min_protective_depth`` of
+the segment's protective field, which a scenario may use to show what that misses.
 
 Examples
 --------
 >>> from robots.presets import PIONEER3DX
+>>> from scenarios.spec.layout import scenario_world
 >>> from scenarios.spec.load import load_scenario
->>> from scenarios.spec.segments import path_segments
->>> from worlds import load_world
->>> first = path_segments(load_world("pal1"))[0]
->>> fields = VehicleFields(load_scenario("pal1"), PIONEER3DX, first.fields, deceleration=1.0)
->>> round(fields.least_reach, 3)   # past the LMS100's 0.5 m blind zone ahead of the bumper
-0.44
+>>> spec = load_scenario("pal1")
+>>> fields = VehicleFields(spec, PIONEER3DX, scenario_world(spec))
+>>> field = fields.minimum_field("niches", speed=0.4)
+>>> round(field.bounds[2], 3)   # reaches 0.6 m ahead of the bumper at 0.18 m
+0.782
 """
 
 from __future__ import annotations
 
 import numpy as np
+import shapely
 
 from robots.presets import UGVSpec
-from robots.safety import FieldSet, SafetyOutput, SafetyPolicy, SafetySupervisor
-from robots.stopping import blind_reach, stop_envelope, stopping_distance
+from robots.safety import SafetyOutput, SafetyPolicy, SafetySupervisor
+from robots.stopping import minimum_protective_field
 from scenarios.bench.policies import (
     FieldView,
     checked_readings,
     counted_occupancy,
     field_policy,
 )
+from scenarios.spec.field_sizing import field_checks, required_size, stop_model
 from scenarios.spec.scenario import ScenarioSpec
-from scenarios.spec.segments import PathSegment
+from scenarios.spec.segments import PathSegment, path_segments
 from semistatic.local_map import LocalMap
+from worlds.spec import WorldSpec
 
 __all__ = ["VehicleFields"]
 
 
 class VehicleFields:
-    """The safety supervisor of one vehicle with its field policy and stop envelope.
+    """The safety supervisor of one vehicle with its field policy and minimum field.
 
     Parameters
     ----------
@@ -47,10 +54,8 @@ class VehicleFields:
         The scenario (its ``safety`` settings, ``rates`` and ``policy``).
     robot
         The vehicle (footprint, safety laser).
-    fields
-        The fields of the segment the vehicle starts on.
-    deceleration
-        The braking deceleration of a protective stop (m/s^2): the follower's limit.
+    route
+        The world with the path the vehicle drives (its segments' fields and speed).
 
     Attributes
     ----------
@@ -58,55 +63,56 @@ class VehicleFields:
         The field policy (a fresh bundled one, or the scenario's object).
     supervisor
         The :class:`~robots.safety.SafetySupervisor` (zone, stops, slowdowns).
-    least_reach
-        The envelope's least reach ahead of the footprint (m): ``min_protective_depth``,
-        and past the safety laser's blind zone.
+    model
+        The vehicle's :class:`~robots.stopping.StopModel`.
     """
 
-    def __init__(self, spec: ScenarioSpec, robot: UGVSpec, fields: FieldSet,
-                 deceleration: float) -> None:
+    def __init__(self, spec: ScenarioSpec, robot: UGVSpec, route: WorldSpec) -> None:
         safety = spec.safety
         self.settings = safety
+        self.robot = robot
         self.policy = field_policy(spec.policy)
+        segments = path_segments(route)
         self.supervisor = SafetySupervisor(
-            fields,
+            segments[0].fields,
             SafetyPolicy(warning_speed_scale=safety.slowdown,
                          release_delay=safety.release_delay,
-                         min_points=safety.min_points),
+                         min_points=safety.min_points,
+                         multiple_sampling=robot.safety_laser.laser.multiple_sampling),
         )
-        # A stop request waits up to one safety scan period and one control period, then
-        # the follower brakes at its deceleration limit.
-        self.reaction_time = 1.0 / spec.rates.safety_hz + 1.0 / spec.rates.control_hz
-        self.deceleration = float(deceleration)
+        self.model = stop_model(spec, robot)
         self.footprint = np.asarray(robot.footprint, dtype=float)
-        # The envelope reaches at least min_protective_depth ahead, and past the safety
-        # laser's blind zone: a reading it cannot see would never stop the vehicle.
-        self.least_reach = max(
-            safety.min_protective_depth,
-            blind_reach(self.footprint, robot.safety_laser.x, robot.safety_laser.laser.range_min),
-        )
+        self._supplements = {check.segment: check.supplements
+                             for check in field_checks(spec, route, robot)}
+        self._fixed = {segment.name: _first_depth(segment, safety.min_protective_depth)
+                       for segment in segments}
         self._travelled = 0.0  # forward travel (m, encoders) since the last safety scan
         self._since = 0.0      # ... and that scan's time
 
-    def reset(self, fields: FieldSet, stamp: float) -> None:
-        """Start a lap at rest on a segment with ``fields`` at time ``stamp``."""
+    def reset(self, segment: PathSegment, stamp: float) -> None:
+        """Start a lap at rest on ``segment`` at time ``stamp``."""
         self.supervisor.reset()
-        self.supervisor.set_fields(fields)
+        self.supervisor.set_fields(segment.fields)
         self._travelled, self._since = 0.0, stamp
 
     def travel(self, forward: float) -> None:
         """Add an odometry increment's forward travel (m)."""
         self._travelled += forward
 
-    def stop_envelope(self, stamp: float):
-        """Return the stop envelope at the speed measured since the last scan (robot frame)."""
+    def minimum_field(self, segment: str, speed: float) -> shapely.Geometry:
+        """Return the minimum protective field on ``segment`` at ``speed`` (robot frame)."""
+        if self.settings.minimum_field == "fixed":
+            return self._fixed[segment]
+        supplements = self._supplements[segment]
+        length, width = required_size(self.model, supplements, self.robot, speed)
+        return minimum_protective_field(self.footprint, length, width, supplements.general)
+
+    def measured_speed(self, stamp: float) -> float:
+        """Return the speed (m/s) the encoders measured since the last call; restart."""
         elapsed = stamp - self._since
         speed = self._travelled / elapsed if elapsed > 0.0 else 0.0
         self._travelled, self._since = 0.0, stamp
-        reach = max(stopping_distance(speed, self.reaction_time, self.deceleration),
-                    self.least_reach)
-        return stop_envelope(self.footprint, reach if speed >= 0.0 else -reach,
-                             self.settings.general_supplement)
+        return speed
 
     def supervise(self, points: np.ndarray, segment: PathSegment, stamp: float,
                   local_map: LocalMap, ekf_pose: np.ndarray) -> SafetyOutput:
@@ -114,10 +120,17 @@ class VehicleFields:
         supervisor = self.supervisor
         if supervisor.field_set is not segment.fields:
             supervisor.set_fields(segment.fields)
-        envelope = self.stop_envelope(stamp)
+        minimum = self.minimum_field(segment.name, abs(self.measured_speed(stamp)))
         answer = self.policy.counted_readings(
-            FieldView(points, segment, envelope, ekf_pose, local_map, self.settings))
+            FieldView(points, segment, minimum, ekf_pose, local_map, self.settings))
         readings = checked_readings(self.policy, answer, len(points))
-        occupancy = counted_occupancy(points, segment.fields, envelope, readings,
+        occupancy = counted_occupancy(points, segment.fields, minimum, readings,
                                       supervisor.policy.min_points)
         return supervisor.update(occupancy, stamp)
+
+
+def _first_depth(segment: PathSegment, depth: float) -> shapely.Geometry:
+    """Return the part of the segment's protective field within ``depth`` of its start."""
+    polygon = segment.fields.protective_polygon
+    x_min, y_min, _, y_max = polygon.bounds
+    return polygon.intersection(shapely.box(x_min - 1.0, y_min - 1.0, x_min + depth, y_max + 1.0))

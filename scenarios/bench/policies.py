@@ -9,12 +9,10 @@ readings that count for the warning field and for the protective field. ``None``
 
 A policy may reshape or ignore the fields as it likes (count fewer readings, or none),
 but it cannot configure the stop away: whatever it answers, every reading inside the
-vehicle's *stop envelope* counts for both fields. The envelope is what the vehicle could
-touch before it stands: its footprint swept over the stopping distance at the measured
-speed (never less than ``safety.min_protective_depth``), grown by
-``safety.general_supplement`` on every side (:func:`robots.stopping.stop_envelope`). So a
-person in front of or beside the vehicle always stops it, and a field drawn too short
-does not hide them.
+vehicle's *minimum protective field* counts for both fields: the field the safety
+standard's formula asks for at the measured speed, and the footprint grown by the
+laser's general supplement on every side (:mod:`scenarios.bench.fields`). So a person in
+front of or beside the vehicle always stops it, and a policy sees read-only readings.
 
 Write a policy as a subclass of :class:`FieldPolicy` with a ``name`` and a
 ``counted_readings(view)`` method (and, where it needs them, the hooks ``start_lap`` and
@@ -84,9 +82,9 @@ class FieldView:
     segment
         The path segment the robot is on; ``segment.fields`` holds its warning and
         protective polygons (robot frame).
-    stop_envelope
-        The vehicle's stop envelope now (robot frame): readings inside it count for both
-        fields, whatever the policy answers.
+    minimum_field
+        The vehicle's minimum protective field now (robot frame): readings inside it count
+        for both fields, whatever the policy answers.
     robot_pose
         The EKF's robot pose ``(x, y, theta)`` in the world frame.
     local_map
@@ -110,7 +108,7 @@ class FieldView:
 
     points: np.ndarray
     segment: PathSegment
-    stop_envelope: shapely.Geometry
+    minimum_field: shapely.Geometry
     robot_pose: np.ndarray
     local_map: LocalMap
     settings: SafetySettings
@@ -348,30 +346,31 @@ def checked_readings(policy: FieldPolicy, readings: object, count: int) -> Field
 def counted_occupancy(
     points: np.ndarray,
     fields: FieldSet,
-    stop_envelope: shapely.Geometry,
+    minimum_field: shapely.Geometry,
     readings: FieldReadings | None,
     min_points: int,
 ) -> FieldState:
     """Count the readings a policy lets count in each field, and every one that must stop.
 
     A reading counts for a field when it lies inside the field and the policy's mask lets
-    it count, or when it lies inside ``stop_envelope`` (what the vehicle could touch
-    before it stands, :func:`robots.stopping.stop_envelope`), wherever that is: a policy
-    can shrink a field, it cannot configure the stop away, and a field drawn too short or
-    too narrow does not hide what stands beside or just ahead of the vehicle.
+    it count, or when it lies inside ``minimum_field`` (what the vehicle could touch
+    before it stands, :func:`robots.stopping.minimum_protective_field`), wherever that
+    is: a policy can shrink a field, it cannot configure the stop away, and a field drawn
+    too short or too narrow does not hide what stands beside or just ahead of the
+    vehicle.
 
     Examples
     --------
     >>> fields = FieldSet([(0, -1), (2, -1), (2, 1), (0, 1)], [(0, -1), (1, -1), (1, 1), (0, 1)])
-    >>> envelope = shapely.box(-0.5, -0.5, 0.2, 0.5)
+    >>> minimum = shapely.box(-0.5, -0.5, 0.2, 0.5)
     >>> points = np.array([[0.1, 0.0], [0.5, 0.0], [1.5, 0.0], [-0.3, 0.4]])
     >>> nothing = np.zeros(4, dtype=bool)
-    >>> counted_occupancy(points, fields, envelope, FieldReadings(nothing, nothing), 1)
+    >>> counted_occupancy(points, fields, minimum, FieldReadings(nothing, nothing), 1)
     FieldState(warning_count=2, protective_count=2, min_points=1)
-    >>> counted_occupancy(points, fields, envelope, None, 1)
+    >>> counted_occupancy(points, fields, minimum, None, 1)
     FieldState(warning_count=4, protective_count=3, min_points=1)
     """
-    must_stop = points_inside(stop_envelope, points)
+    must_stop = points_inside(minimum_field, points)
     warning = points_inside(fields.warning_polygon, points)
     protective = points_inside(fields.protective_polygon, points)
     if readings is not None:

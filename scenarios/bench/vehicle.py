@@ -128,8 +128,7 @@ class Vehicle:
         )
         self.follower = ChainedFormFollower(path, FollowerParams(speed=route.path.speed))
         self.contacts = ContactMonitor(sim, self.body.body_id, world)
-        self.fields = VehicleFields(spec, robot, self.segments[0].fields,
-                                    deceleration=self.follower.params.max_deceleration)
+        self.fields = VehicleFields(spec, robot, route)
         self._local_maps = {
             seg.name: LocalMap(seg.origin, [seg.safety_area], params=spec.mapper, segment=seg.name)
             for seg in self.segments
@@ -291,7 +290,7 @@ class Vehicle:
         sim.step(SETTLE_STEPS)
         self.sensors.encoders.reset(self.body.wheel_angles())
         self.follower.reset()
-        self.fields.reset(self.segments[0].fields, sim.sim_time)
+        self.fields.reset(self.segments[0], sim.sim_time)
         self.contacts.reset()
         self._lap_counters = (0, 0, 0)
         self.speed_scale = 1.0

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from semistatic.errors import MEMORY, SpecError
 from semistatic.params import MapperParams
-from semistatic.validation import bounds, check_fields, or_object, safe_name
+from semistatic.validation import bounds, check_fields, did_you_mean, or_object, safe_name
 from worlds.spec import BOX_SIZE, COORDINATE
 
 __all__ = [
@@ -97,6 +97,10 @@ class Noise:
         check_fields(self)
 
 
+MINIMUM_FIELDS = ("standard", "fixed")
+"""How the minimum protective field (what no field policy may shrink) is drawn."""
+
+
 @dataclass(frozen=True)
 class SafetySettings:
     """The safety supervisor and the field policy.
@@ -106,9 +110,14 @@ class SafetySettings:
     ``min_points`` readings must fall in a field before it counts (one noisy beam is
     ignored). Under the ``adaptive`` policy, readings within ``adaptive_margin`` (m) of a
     known semi-static object of the current segment no longer count. Whatever the policy,
-    every reading in the vehicle's stop envelope counts (the footprint swept over the
-    stopping distance at the measured speed, at least ``min_protective_depth`` ahead,
-    grown by ``general_supplement`` on every side; :mod:`scenarios.bench.policies`).
+    every reading in the *minimum protective field* counts: with ``minimum_field =
+    "standard"`` the field the standard's formula asks for at the measured speed, and the
+    footprint grown by the laser's general supplement (:mod:`scenarios.bench.fields`);
+    ``"fixed"`` keeps only the first ``min_protective_depth`` (m) of the segment's
+    protective field, to study what that misses. A protective field shorter or narrower
+    than the formula asks for at the segment's speed is refused
+    (:mod:`scenarios.spec.field_sizing`) unless ``undersized_fields`` says the scenario
+    studies such fields.
 
     Parameters
     ----------
@@ -120,22 +129,29 @@ class SafetySettings:
         Readings that must fall in a field before it counts.
     adaptive_margin
         Distance (m) from a known object within which readings no longer count (adaptive).
+    minimum_field
+        ``standard`` (sized by the formula at the measured speed) or ``fixed``.
     min_protective_depth
-        Least reach (m) of the stop envelope ahead of the footprint, even at standstill.
-    general_supplement
-        Margin (m) around the swept footprint in which a reading stops the vehicle
-        whatever the policy (a scanner's measurement error; Sick's manuals use 0.1 m).
+        Depth (m) of the protective field kept whole with ``minimum_field = "fixed"``.
+    undersized_fields
+        Run protective fields shorter than the formula asks for (their margins are
+        reported) instead of refusing them.
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
     release_delay: float = field(default=0.5, metadata=bounds(ge=0.0, le=10.0))
     min_points: int = field(default=3, metadata=bounds(ge=1, le=100))
     adaptive_margin: float = field(default=0.10, metadata=bounds(gt=0.0, le=1.0))
+    minimum_field: str = "standard"
     min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
-    general_supplement: float = field(default=0.10, metadata=bounds(ge=0.0, le=1.0))
+    undersized_fields: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.minimum_field not in MINIMUM_FIELDS:
+            hint = did_you_mean(self.minimum_field, MINIMUM_FIELDS)
+            raise SpecError(MEMORY, "minimum_field", f"must be one of "
+                            f"{', '.join(MINIMUM_FIELDS)}, got {self.minimum_field!r}{hint}")
 
 
 @dataclass(frozen=True)
