@@ -2,11 +2,15 @@
 
 A protective stop is not instant. From the moment an object enters the protective field
 the vehicle keeps its speed ``v`` while the scanner confirms it (its *response time*:
-``multiple_sampling`` scan periods) and the controller applies the stop (up to one
-control period); then it brakes at ``a``. Its stopping distance is
+``multiple_sampling`` scan periods) and until the controller's next command (the
+*command latency*); then it brakes at ``a``. Its stopping distance is
 
-    S_A = v T + v^2 / (2 a),    T = multiple_sampling * scan_period + control_period
+    S_A = v T + B(v),    T = multiple_sampling * scan_period + command_latency
 
+where the braking distance ``B(v) ~ v^2 / (2 a)`` is that of the follower's ramp: its
+command drops by ``a T_c`` at every control period ``T_c``, from the first command after
+the stop (:meth:`StopModel.braking_distance`; ``v^2 / (2 a) - v T_c / 2`` when
+``v / (a T_c)`` is whole)
 (Sick's operating instructions for the S300, S3000 and microScan3, "stopping distance"
 of mobile applications; ISO 13855's ``S = K (T_M + T_S) + C`` is the stationary
 machine's form). The protective field must be at least
@@ -21,12 +25,13 @@ Following Sick, the person is assumed to stand still: only the vehicle's speed c
 
 Examples
 --------
->>> model = StopModel(scanner_response_s=0.16, control_period_s=0.02, deceleration=1.0)
->>> round(model.distance(1.0), 3)          # 0.18 s at 1 m/s, then 0.5 m of braking
-0.68
+>>> model = StopModel(scanner_response_s=0.16, command_latency_s=0.0, control_period_s=0.02,
+...                   deceleration=1.0)
+>>> round(model.distance(1.0), 3)          # 0.16 s at 1 m/s, then 0.49 m of braking
+0.65
 >>> supplements = Supplements(general=0.1, reflector=0.2, ground_clearance=0.15)
 >>> [round(value, 3) for value in field_size(model.distance(1.0), supplements, 0.8)]
-[1.13, 1.7]
+[1.1, 1.7]
 """
 
 from __future__ import annotations
@@ -109,24 +114,29 @@ class StopModel:
     ----------
     scanner_response_s
         The safety scanner's response time (s), :func:`response_time`.
+    command_latency_s
+        The longest wait (s) from the scan that confirms the object to the control
+        command that acts on it.
     control_period_s
-        The longest wait until the controller applies a stop (s): one control period.
+        The control period (s): the follower lowers its command once per period.
     deceleration
         The braking deceleration (m/s^2): the lower of the follower's limit and what the
         motors can give.
 
     Examples
     --------
-    >>> StopModel(0.16, 0.02, 1.0).reaction_time
-    0.18
+    >>> model = StopModel(0.16, 0.0, 0.02, 1.0)
+    >>> model.reaction_time, round(model.braking_distance(1.0), 6)
+    (0.16, 0.49)
     """
 
     scanner_response_s: float
+    command_latency_s: float
     control_period_s: float
     deceleration: float
 
     def __post_init__(self) -> None:
-        for name in ("scanner_response_s", "control_period_s"):
+        for name in ("scanner_response_s", "command_latency_s", "control_period_s"):
             value = getattr(self, name)
             if not (value >= 0.0 and math.isfinite(value)):
                 raise ValueError(f"StopModel: {name} must be >= 0 s, got {value}")
@@ -136,11 +146,24 @@ class StopModel:
     @property
     def reaction_time(self) -> float:
         """Return the time (s) at full speed before braking starts."""
-        return self.scanner_response_s + self.control_period_s
+        return self.scanner_response_s + self.command_latency_s
+
+    def braking_distance(self, speed: float) -> float:
+        """Return the distance (m) of the follower's braking ramp from ``speed`` (m/s).
+
+        Commands ``v - a T_c k`` for ``k = 1, 2, ...``, each held one control period
+        ``T_c``, until zero; ``v^2 / (2 a)`` when the period is 0.
+        """
+        v, a, period = abs(float(speed)), self.deceleration, self.control_period_s
+        if period == 0.0:
+            return v * v / (2.0 * a)
+        step = a * period
+        steps = math.floor(v / step)  # whole steps above zero
+        return period * (steps * v - step * steps * (steps + 1) / 2.0)
 
     def distance(self, speed: float) -> float:
         """Return the stopping distance (m) from ``speed`` (m/s)."""
-        return stopping_distance(speed, self.reaction_time, self.deceleration)
+        return abs(float(speed)) * self.reaction_time + self.braking_distance(speed)
 
 
 def ground_clearance_supplement(ground_clearance: float) -> float:

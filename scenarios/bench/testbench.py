@@ -46,7 +46,6 @@ from types import MappingProxyType
 import numpy as np
 
 from robots.presets import UGVSpec
-from scenarios.bench.clock import SensorClock
 from scenarios.bench.fleet import PARKING
 from scenarios.bench.gui import GuiView
 from scenarios.bench.observer import Observer, require_observer
@@ -56,6 +55,7 @@ from scenarios.bench.scene import Scene
 from scenarios.bench.scoring import GroundTruthScoring, Table1Reference
 from scenarios.bench.sharing import SegmentPublisher
 from scenarios.bench.vehicle import Vehicle
+from scenarios.spec.clock import SensorClock
 from scenarios.spec.layout import lap_worlds, robot_preset
 from scenarios.spec.load import load_scenario
 from scenarios.spec.routes import fleet_vehicles, vehicle_route

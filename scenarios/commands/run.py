@@ -131,7 +131,8 @@ def _estimated_sim_time(spec, world) -> float:
 
 def main_check(args: argparse.Namespace) -> int:
     """Run ``semistatic check``: validate and print a summary; return the exit status."""
-    from scenarios.spec.layout import lap_worlds
+    from scenarios.spec.field_sizing import field_checks
+    from scenarios.spec.layout import lap_worlds, robot_preset
     from worlds.checks import build_spline
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
@@ -147,8 +148,17 @@ def main_check(args: argparse.Namespace) -> int:
         f"  robot {spec.robot}, {spec.laps} laps, seed {spec.seed}, policy {spec.policy}, "
         f"{len(spec.moves)} box moves; boxes per lap: {boxes}\n"
         f"  every lap's layout passes the checks (posts in view, boxes clear of walls, "
-        f"the path and the protective fields)"
+        f"the path and the protective fields)\n"
+        f"  protective fields against the formula (m; margin = actual - required):"
     )
+    print(f"    {'segment':<16} {'speed':>5} {'length':>8} {'needs':>6} {'width':>6} "
+          f"{'needs':>6} {'margin':>7}")
+    for check in field_checks(spec, world, robot_preset(spec.robot, file=spec.source)):
+        margin = min(check.length_margin, check.width_margin)
+        flag = "  undersized (studied)" if check.undersized else ""
+        print(f"    {check.segment:<16} {check.speed:>5.2f} {check.actual_length:>8.3f} "
+              f"{check.required_length:>6.3f} {check.actual_width:>6.3f} "
+              f"{check.required_width:>6.3f} {margin:>+7.3f}{flag}")
     return 0
 
 

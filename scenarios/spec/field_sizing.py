@@ -17,8 +17,9 @@ Examples
 >>> from scenarios.spec.layout import robot_preset, scenario_world
 >>> spec = load_scenario("warehouse")
 >>> checks = field_checks(spec, scenario_world(spec), robot_preset(spec.robot))
->>> [check.segment for check in checks][:2]
-['west_up', 'north_west']
+>>> first = checks[0]
+>>> first.segment, round(first.required_length, 3), round(first.required_width, 3)
+('south_west', 0.9, 1.3)
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from robots.stopping import (
     ground_clearance_supplement,
     response_time,
 )
+from scenarios.spec.clock import command_latency
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import path_segments, swept_area
 from semistatic.errors import SpecError
@@ -86,11 +88,12 @@ def stop_model(spec: ScenarioSpec, robot: UGVSpec) -> StopModel:
     >>> from robots.presets import LGV
     >>> model = stop_model(load_scenario("warehouse"), LGV)
     >>> round(model.reaction_time, 3), round(model.distance(1.0), 3)
-    (0.18, 0.68)
+    (0.16, 0.65)
     """
     laser = robot.safety_laser.laser
     return StopModel(
         scanner_response_s=response_time(1.0 / spec.rates.safety_hz, laser.multiple_sampling),
+        command_latency_s=command_latency(spec.rates),
         control_period_s=1.0 / spec.rates.control_hz,
         deceleration=vehicle_deceleration(robot),
     )

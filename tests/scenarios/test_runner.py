@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.bench.clock import Schedule
 from scenarios.bench.runner import run_scenario
 from scenarios.cli import main
 from scenarios.results.outputs import summarize
+from scenarios.spec.clock import Schedule
 from scenarios.spec.load import load_scenario
 from tests.scenarios.tiny_world import write_tiny
 

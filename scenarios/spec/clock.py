@@ -2,7 +2,9 @@
 
 Physics steps at ``rates.physics_hz``; control, localization and the safety laser run at
 their own rates on that clock (:class:`Schedule`), and :class:`SensorClock` tells the
-bench at each step which of the three are due.
+bench at each step which of the three are due (in a step where both are due, the safety
+scan is handled before the control command). :func:`command_latency` is how long a
+stop decided at a safety scan waits for the next control command.
 
 Examples
 --------
@@ -16,7 +18,7 @@ import math
 
 from scenarios.spec.scenario import Rates
 
-__all__ = ["Schedule", "SensorClock"]
+__all__ = ["Schedule", "SensorClock", "command_latency"]
 
 
 class Schedule:
@@ -108,3 +110,30 @@ class SensorClock:
                 steps[index] = schedule.next_due(n)
         self._next_due = min(steps)
         return due
+
+
+def command_latency(rates: Rates) -> float:
+    """Return the longest wait (s) from a safety scan to the control command that acts on it.
+
+    Over one whole period of the two schedules: 0 when every safety scan falls on a
+    control step (the command in that step already uses the scan), else up to one
+    control period.
+
+    Examples
+    --------
+    >>> from scenarios.spec.scenario import Rates
+    >>> command_latency(Rates())   # 12.5 Hz scans on a 50 Hz control clock
+    0.0
+    >>> command_latency(Rates(control_hz=30.0, safety_hz=12.5))   # 6 physics steps
+    0.025
+    """
+    safety = Schedule(rates.safety_hz, rates.physics_hz)
+    control = Schedule(rates.control_hz, rates.physics_hz)
+    # Rates are given to 0.1 Hz at most on a clock of whole Hz: a few seconds repeat.
+    horizon = round(10.0 * rates.physics_hz)
+    worst, step = 0, safety.next_due(0)
+    while step <= horizon:
+        command = step if control.due(step) else control.next_due(step)
+        worst = max(worst, command - step)
+        step = safety.next_due(step)
+    return worst / rates.physics_hz
