@@ -18,15 +18,19 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
+from semistatic.frames import transform_points
+
 __all__ = [
     "AREA_MARGIN",
     "MATCH_DISTANCE",
     "PERSON_DISTANCE",
     "VEHICLE_DISTANCE",
+    "box_is_mapped",
     "clip_to_area",
     "detection_scores",
     "false_objects_near",
     "match_polylines_to_boxes",
+    "near_box",
     "score_lap",
 ]
 
@@ -232,3 +236,37 @@ def false_objects_near(
             if not matched:
                 count += _count_near([line], area_at(local_map[map_id].first_seen), distance)
     return count
+
+
+def near_box(outline: np.ndarray, margin: float) -> tuple[float, float, float, float]:
+    """Return the bounding box of ``outline`` grown by ``margin`` (m) on every side.
+
+    Examples
+    --------
+    >>> near_box(np.array([[0.0, 0.0], [1.0, 0.5]]), 0.1)
+    (-0.1, -0.1, 1.1, 0.6)
+    """
+    low, high = outline.min(axis=0) - margin, outline.max(axis=0) + margin
+    return float(low[0]), float(low[1]), float(high[0]), float(high[1])
+
+
+def box_is_mapped(local_maps, outline: np.ndarray) -> bool:
+    """Return whether a polyline of ``local_maps`` lies on the box ``outline`` (world frame).
+
+    :func:`~scenarios.results.metrics.match_polylines_to_boxes` on the world-frame polylines whose
+    vertices all lie in the outline's box grown by twice ``MATCH_DISTANCE``: a polyline
+    with a vertex outside cannot lie on the outline. The test is made in each map's
+    segment frame on the grown box's corners, so only candidates are moved to the world.
+    """
+    xmin, ymin, xmax, ymax = near_box(outline, 2.0 * MATCH_DISTANCE)
+    corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+    lines = []
+    for local_map in local_maps:
+        # The grown box in the segment frame, boxed again: a superset of the candidates.
+        xs, ys = transform_points(local_map.world_in_local, corners).T.tolist()
+        lx, ly, hx, hy = min(xs), min(ys), max(xs), max(ys)
+        for line in local_map.polylines().values():
+            bx0, by0, bx1, by1 = line.box
+            if bx0 >= lx and by0 >= ly and bx1 <= hx and by1 <= hy:
+                lines.append(line.transformed(local_map.origin).points)
+    return bool(lines) and bool(match_polylines_to_boxes(lines, {"box": outline}).any())

@@ -8,6 +8,7 @@ files, ``scenarios.logs.bag`` into a ROS 2 bag.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -144,6 +145,7 @@ class RunLog:
     engine_time_s: float = 0.0
     sharing: dict | None = None
     vehicles: dict[str, RunLog] = field(default_factory=dict)
+    safety_record: Any = None  # a scenarios.bench.safety_record.SafetyRecord
 
 
 def combine_logs(fleet: RunLog, vehicles: dict[str, RunLog], store=None) -> None:

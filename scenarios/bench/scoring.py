@@ -18,9 +18,9 @@ import numpy as np
 import shapely
 
 from scenarios.bench.ground_truth import (
-    MATCH_DISTANCE,
+    box_is_mapped,
     false_objects_near,
-    match_polylines_to_boxes,
+    near_box,
     score_lap,
 )
 from scenarios.bench.observer import Observer, VehicleView
@@ -56,19 +56,13 @@ def moved_boxes(spec: ScenarioSpec, lap: int) -> tuple[str, ...]:
     return tuple(m.box for m in spec.moves if m.lap == lap and m.action in ("move", "add"))
 
 
-def _near_box(outline: np.ndarray, margin: float) -> tuple[float, float, float, float]:
-    """Return the bounding box of ``outline`` grown by ``margin`` (m) on every side."""
-    low, high = outline.min(axis=0) - margin, outline.max(axis=0) + margin
-    return float(low[0]), float(low[1]), float(high[0]), float(high[1])
-
-
 def _hits(outline: np.ndarray, points: np.ndarray) -> int:
     """Return how many ``points`` lie within ``OBSERVED_DISTANCE`` of the closed ``outline``.
 
     Only points in the outline's box grown by twice that distance can (the margin covers
     rounding), so GEOS measures those alone, and none when they are too few to count.
     """
-    xmin, ymin, xmax, ymax = _near_box(outline, 2.0 * OBSERVED_DISTANCE)
+    xmin, ymin, xmax, ymax = near_box(outline, 2.0 * OBSERVED_DISTANCE)
     x, y = points[:, 0], points[:, 1]
     near = points[(x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax)]
     if near.shape[0] < OBSERVED_READINGS:
@@ -76,28 +70,6 @@ def _hits(outline: np.ndarray, points: np.ndarray) -> int:
     ring = shapely.LinearRing(np.vstack([outline, outline[:1]]))
     return int(np.count_nonzero(shapely.distance(ring, shapely.points(near))
                                 <= OBSERVED_DISTANCE))
-
-
-def _mapped(local_maps, outline: np.ndarray) -> bool:
-    """Return whether a polyline of ``local_maps`` lies on the box ``outline``.
-
-    :func:`~scenarios.results.metrics.match_polylines_to_boxes` on the world-frame polylines whose
-    vertices all lie in the outline's box grown by twice ``MATCH_DISTANCE``: a polyline
-    with a vertex outside cannot lie on the outline. The test is made in each map's
-    segment frame on the grown box's corners, so only candidates are moved to the world.
-    """
-    xmin, ymin, xmax, ymax = _near_box(outline, 2.0 * MATCH_DISTANCE)
-    corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
-    lines = []
-    for local_map in local_maps:
-        # The grown box in the segment frame, boxed again: a superset of the candidates.
-        xs, ys = transform_points(local_map.world_in_local, corners).T.tolist()
-        lx, ly, hx, hy = min(xs), min(ys), max(xs), max(ys)
-        for line in local_map.polylines().values():
-            bx0, by0, bx1, by1 = line.box
-            if bx0 >= lx and by0 >= ly and bx1 <= hx and by1 <= hy:
-                lines.append(line.transformed(local_map.origin).points)
-    return bool(lines) and bool(match_polylines_to_boxes(lines, {"box": outline}).any())
 
 
 class GroundTruthScoring(Observer):
@@ -162,7 +134,7 @@ class GroundTruthScoring(Observer):
                     true_points = scan.world_points()[scan.valid_mask()]
                 if _hits(outline, true_points) >= OBSERVED_READINGS:
                     self._first_seen[name] = scans_so_far
-            if name in self._first_seen and _mapped(vehicle.local_maps.values(), outline):
+            if name in self._first_seen and box_is_mapped(vehicle.local_maps.values(), outline):
                 self._detected_at[name] = scans_so_far
 
     def latencies(self) -> dict[str, int | None]:

@@ -51,6 +51,7 @@ from scenarios.bench.gui import GuiView
 from scenarios.bench.observer import Observer, require_observer
 from scenarios.bench.policies import FieldPolicy
 from scenarios.bench.records import LapLog, RunLog, combine_logs
+from scenarios.bench.safety_record import SafetyRecorder
 from scenarios.bench.scene import Scene
 from scenarios.bench.scoring import GroundTruthScoring, Table1Reference
 from scenarios.bench.sharing import SegmentPublisher
@@ -203,6 +204,7 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         for vehicle in self.fleet:
             vehicle.add_observer(GroundTruthScoring())
             vehicle.add_observer(Table1Reference())
+            vehicle.add_observer(SafetyRecorder(vehicle.fields.model.scanner_response_s))
             if spec.sharing:  # alone, a vehicle publishes to a store of its own
                 vehicle.add_observer(SegmentPublisher(store, vehicle.index, segment_names=names))
         for observer in self.observers:

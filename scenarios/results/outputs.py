@@ -26,6 +26,7 @@ import numpy as np
 from scenarios.bench.ground_truth import detection_scores
 from scenarios.bench.policies import policy_name
 from scenarios.bench.records import LapLog, RunLog
+from scenarios.bench.safety_record import merged_record
 from scenarios.process.staging import stage_and_publish
 from scenarios.results.figures import (
     plot_detection_scores,
@@ -36,6 +37,7 @@ from scenarios.results.figures import (
     plot_tangent_histograms,
 )
 from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
+from scenarios.spec.field_sizing import field_checks
 
 __all__ = [
     "PAPER_TABLE1",
@@ -45,6 +47,7 @@ __all__ = [
     "failed_laps",
     "json_text",
     "policy_comparison",
+    "safety_kpis",
     "stage_and_publish",
     "summarize",
     "table1_rows",
@@ -145,6 +148,7 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "slowed_time_s": [round(lap.slowed_time_s, 4) for lap in laps],
             "laps_completed": sum(lap.completed for lap in laps),
             "failed_laps": failed_laps(log),
+            **safety_kpis(log),
         },
         "performance": {
             "sim_time_s": round(log.sim_time_s, 3),
@@ -159,6 +163,25 @@ def summarize(log: RunLog) -> dict[str, Any]:
         **extra,
         **({"vehicles": {name: summarize(vehicle) for name, vehicle in log.vehicles.items()}}
            if log.vehicles else {}),
+    }
+
+
+def safety_kpis(log: RunLog) -> dict[str, Any]:
+    """Return the run's safety figures (:mod:`scenarios.bench.safety_record`) and field margins.
+
+    A fleet's figures are its vehicles' together; ``field_margins_m`` is each segment's
+    protective field against the standard's formula for the first vehicle
+    (:mod:`scenarios.spec.field_sizing`).
+    """
+    records = [log.safety_record] if log.safety_record is not None else [
+        vehicle.safety_record for vehicle in log.vehicles.values()
+        if vehicle.safety_record is not None]
+    kpis = merged_record(records).as_metrics() if records else {}
+    checks = field_checks(log.spec, log.world, log.robot)
+    return {
+        **kpis,
+        "near_miss_distance_m": log.spec.safety.near_miss_distance,
+        "field_margins_m": {check.segment: check.as_metrics() for check in checks},
     }
 
 

@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from robots.presets import PRESETS
-from scenarios.spec.layout import check_scenario_layout, scenario_world
+from scenarios.spec.field_sizing import check_field_sizes
+from scenarios.spec.layout import check_scenario_layout, robot_preset, scenario_world
 from scenarios.spec.routes import check_vehicles
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError, join_key
@@ -276,7 +277,9 @@ def scenario_from_toml(
     overrides (an error in an overridden value names ``--set``). ``--set laps=N`` below
     the file's laps drops the moves of the laps that never run. With ``check_layout``
     the world, robot, people and every lap's box layout are checked too
-    (:func:`scenarios.spec.layout.check_scenario_layout`), which loads the world.
+    (:func:`scenarios.spec.layout.check_scenario_layout`), which loads the world, and
+    every segment's protective field against the standard's formula
+    (:func:`scenarios.spec.field_sizing.check_field_sizes`).
 
     Examples
     --------
@@ -305,8 +308,12 @@ def scenario_from_toml(
     if check_layout:
         with _blame_overrides(file, keys):
             check_scenario_layout(spec, moves=file_spec.moves)
+            world = scenario_world(spec)
             if spec.vehicles:
-                check_vehicles(spec, scenario_world(spec))
+                check_vehicles(spec, world)
+            robots = {vehicle.robot or spec.robot for vehicle in spec.vehicles} or {spec.robot}
+            for robot in sorted(robots):
+                check_field_sizes(spec, world, robot_preset(robot, file=spec.source))
     return spec
 
 

@@ -136,6 +136,11 @@ class SafetySettings:
     undersized_fields
         Run protective fields shorter than the formula asks for (their margins are
         reported) instead of refusing them.
+    near_miss_distance
+        A person closer than this (m) to the vehicle, without contact, is a near miss.
+    creep_speed
+        Speed (m/s) above which a vehicle with a person in its protective field counts as
+        moving (an infraction once it lasts longer than the scanner's response time).
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
@@ -145,6 +150,8 @@ class SafetySettings:
     minimum_field: str = "standard"
     min_protective_depth: float = field(default=0.15, metadata=bounds(gt=0.0, le=2.0))
     undersized_fields: bool = False
+    near_miss_distance: float = field(default=0.2, metadata=bounds(gt=0.0, le=5.0))
+    creep_speed: float = field(default=0.1, metadata=bounds(ge=0.0, le=2.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
