@@ -207,11 +207,11 @@ def test_an_unknown_robot_preset_names_the_key(tiny_spec):
         Testbench(tiny_spec, robot="pioner3dx")
 
 
-def test_no_policy_can_ignore_what_stands_in_the_stop_envelope():
+def test_no_policy_can_ignore_what_stands_in_the_minimum_field():
     fields = FieldSet([(0.2, -0.5), (1.5, -0.5), (1.5, 0.5), (0.2, 0.5)],
                       [(0.2, -0.3), (0.7, -0.3), (0.7, 0.3), (0.2, 0.3)])
-    # A box footprint x in [-0.3, 0.15], |y| <= 0.2, swept 0.1 m ahead, no supplement:
-    # the envelope is the box x in [-0.3, 0.25], |y| <= 0.2 (it starts behind the field).
+    # A minimum field (robot frame) reaching from behind the footprint to 0.25 m ahead,
+    # narrower than the protective field: x in [-0.3, 0.25], |y| <= 0.2.
     envelope = shapely.box(-0.3, -0.2, 0.25, 0.2)
     rng = np.random.default_rng(5)
     points = rng.uniform([-0.5, -0.6], [1.6, 0.6], size=(600, 2))
@@ -269,7 +269,7 @@ def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b(policy):
     with Testbench(spec, policy=policy) as bench:
         metrics = summarize(bench.run())
     safety = metrics["safety"]
-    # The worker stands in the stop envelope: whatever the policy, the robot stops.
+    # The worker stands in the minimum field: whatever the policy, the robot stops.
     assert safety["stops_per_lap"][0] >= 1
     assert safety["collisions"] == 0
 

@@ -5,18 +5,20 @@ from pathlib import Path
 TINY_WORLD = """
 name = "tiny"
 description = "3.5 m corridor with one carton reaching into the warning field"
+# The Pioneer at 0.4 m/s: the protective field is the standard's size (0.59 m ahead of the
+# bumper, 1.28 m wide with the reflector supplement: posts stand within 1 m of it).
 # The end walls stand 2.5 m beyond the path so the swept warning field never reaches them.
 walls = [
-    { start = [-2.5, -1.2], end = [6.5, -1.2] },
-    { start = [-2.5, 1.2], end = [6.5, 1.2] },
-    { start = [-2.5, -1.2], end = [-2.5, 1.2] },
-    { start = [6.5, -1.2], end = [6.5, 1.2] },
+    { start = [-2.5, -1.5], end = [6.5, -1.5] },
+    { start = [-2.5, 1.5], end = [6.5, 1.5] },
+    { start = [-2.5, -1.5], end = [-2.5, 1.5] },
+    { start = [6.5, -1.5], end = [6.5, 1.5] },
 ]
 # Posts on both sides and at both ends: a geometry that does not favour one direction.
 posts = [
-    { x = -2.0, y = -1.09 }, { x = 0.0, y = -1.09 }, { x = 2.0, y = -1.09 },
-    { x = 4.0, y = -1.09 }, { x = 6.0, y = -1.09 },
-    { x = -1.0, y = 1.09 }, { x = 1.0, y = 1.09 }, { x = 3.0, y = 1.09 }, { x = 5.0, y = 1.09 },
+    { x = -2.0, y = -1.39 }, { x = 0.0, y = -1.39 }, { x = 2.0, y = -1.39 },
+    { x = 4.0, y = -1.39 }, { x = 6.0, y = -1.39 },
+    { x = -1.0, y = 1.39 }, { x = 1.0, y = 1.39 }, { x = 3.0, y = 1.39 }, { x = 5.0, y = 1.39 },
     { x = -2.39, y = 0.3 }, { x = 6.39, y = -0.3 },
 ]
 
@@ -28,13 +30,13 @@ knots = [[0.0, 0.0], [1.75, 0.0], [3.5, 0.0]]
 name = "corridor"
 start_knot = 0
 end_knot = 2
-warning = [[0.25, -0.5], [1.4, -0.5], [1.4, 0.5], [0.25, 0.5]]
-protective = [[0.25, -0.3], [0.6, -0.3], [0.6, 0.3], [0.25, 0.3]]
+warning = [[0.18, -0.9], [1.4, -0.9], [1.4, 0.9], [0.18, 0.9]]
+protective = [[0.18, -0.65], [0.78, -0.65], [0.78, 0.65], [0.18, 0.65]]
 
 [[boxes]]
 name = "carton"
-size = [0.5, 0.5, 0.6]
-pose = [2.0, -0.72, 0.0]
+size = [0.5, 0.4, 0.6]
+pose = [2.6, -1.0, 0.0]
 """
 
 TINY_SCENARIO = """
