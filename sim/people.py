@@ -8,7 +8,9 @@ at the last waypoint. Before ``start_time`` a person is not in the scene: it is 
 below the floor, out of every scan plane and out of the robot's reach.
 
 A ``per_lap`` person's clock restarts with every lap (``update(t, lap_start=...)``), so it
-crosses the path at the same point of every lap; other people follow the run's clock.
+crosses the path at the same point of every lap; other people follow the run's clock. A
+person whose walk a vehicle triggers (``PersonSpec.trigger``) stands at its first
+waypoint until the caller says when the trigger fired (``update(..., triggered=...)``).
 
 Examples
 --------
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import bisect
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -145,18 +148,26 @@ class People:
         # Where each body was last put (None: not yet, so the first update places all).
         self._placed: dict[str, tuple[float, float, float] | None] = dict.fromkeys(self._ids)
 
-    def update(self, t: float, lap_start: float = 0.0) -> dict[str, np.ndarray | None]:
+    def update(self, t: float, lap_start: float = 0.0,
+               triggered: Mapping[str, float | None] | None = None) -> dict[str, np.ndarray | None]:
         """Place every person where its route puts it at run time ``t``.
 
         ``lap_start`` is the run time at which the current lap began (the clock of
-        ``per_lap`` people). Returns ``{name: (x, y) or None}``, ``None`` for people not
-        yet in the scene.
+        ``per_lap`` people). ``triggered`` gives, for people a vehicle triggers, the run
+        time their trigger fired (``None``: not yet; they stand at their first waypoint).
+        Returns ``{name: (x, y) or None}``, ``None`` for people not yet in the scene.
         """
         positions: dict[str, np.ndarray | None] = {}
         for walk in self._walks:
             person = walk.person
-            clock = t - lap_start if person.per_lap else t
-            xy = walk.position(clock)
+            if person.trigger != "time":
+                fired = (triggered or {}).get(person.name)
+                # Waiting for the trigger, then its delay: standing at the first waypoint.
+                xy = walk.position(person.start_time if fired is None
+                                   else max(t - fired, person.start_time))
+            else:
+                clock = t - lap_start if person.per_lap else t
+                xy = walk.position(clock)
             if xy is None:
                 positions[person.name] = None
                 xyz = (float(person.waypoints[0][0]), float(person.waypoints[0][1]), PARKED_Z)

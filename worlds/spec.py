@@ -43,12 +43,13 @@ import numpy as np
 import shapely
 
 from semistatic.errors import MEMORY, SpecError
-from semistatic.validation import bounds, check_fields, did_you_mean, safe_name
+from semistatic.validation import SAFE_NAME, bounds, check_fields, did_you_mean, safe_name
 
 __all__ = [
     "BOX_SIZE",
     "COORDINATE",
     "FIELD_POINT",
+    "TRIGGERS",
     "BoxSpec",
     "PathSpec",
     "PersonSpec",
@@ -230,15 +231,30 @@ class BoxSpec:
         return _rectangle(np.asarray(self.pose[:2]), self.pose[2], self.size[0], self.size[1])
 
 
+TRIGGERS = ("time", "distance", "meet")
+"""What starts a person's walk: a clock, or a vehicle coming (see :class:`PersonSpec`)."""
+
+
 @dataclass(frozen=True)
 class PersonSpec:
     """A person (vertical cylinder) walking kinematically through ``waypoints``.
 
-    Starts at ``waypoints[0]`` at ``start_time`` (s, simulated time since the run began,
-    or since the lap began when ``per_lap``), walks at ``speed`` (m/s) to the last
-    waypoint and stays there (or loops back to the first when ``loop``). A world may
-    carry people that are off (``enabled = false``) for scenarios to switch on with
-    :meth:`WorldSpec.enable_people`.
+    With ``trigger = "time"`` the person appears at ``waypoints[0]`` at ``start_time``
+    (s, simulated time since the run began, or since the lap began when ``per_lap``).
+    The other triggers react to a vehicle (``trigger_vehicle``, default the first): the
+    person stands at ``waypoints[0]`` (e.g. hidden behind a box) until
+
+    - ``"distance"``: the vehicle's front is ``trigger_distance`` (m) along its path
+      before the point where the person's first leg crosses the path: the *emergence
+      distance*;
+    - ``"meet"``: a straight walk along the first leg at ``speed`` would meet the
+      vehicle's front at ``meet_at`` of its width (0 its right corner, 1 its left) if the
+      vehicle kept its path speed (as Euro NCAP times its pedestrian targets);
+
+    then waits ``start_time`` more seconds and walks. A person walks at ``speed`` (m/s) to
+    the last waypoint and stays there (or loops back to the first when ``loop``); a
+    ``per_lap`` person starts again with every lap. A world may carry people that are off
+    (``enabled = false``) for scenarios to switch on with :meth:`WorldSpec.enable_people`.
 
     Parameters
     ----------
@@ -253,7 +269,8 @@ class PersonSpec:
     speed
         Walking speed (m/s).
     start_time
-        When the walk starts (s), from the run or, with ``per_lap``, the lap start.
+        When the walk starts (s), from the run or, with ``per_lap``, the lap start; with
+        another trigger, the delay after it fires.
     loop
         Walk back to the first waypoint and start again.
     per_lap
@@ -262,6 +279,14 @@ class PersonSpec:
         Share of laser light reflected (0-1).
     enabled
         Spawned unless a scenario leaves it off (``false``: only when a scenario names it).
+    trigger
+        ``time``, ``distance`` or ``meet`` (above).
+    trigger_vehicle
+        Name of the vehicle the trigger watches (empty: the first vehicle).
+    trigger_distance
+        Emergence distance (m) of the ``distance`` trigger.
+    meet_at
+        Where across the vehicle's front the ``meet`` trigger aims (0 right, 1 left).
 
     Examples
     --------
@@ -280,11 +305,24 @@ class PersonSpec:
     per_lap: bool = True
     remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
     enabled: bool = True
+    trigger: str = "time"
+    trigger_vehicle: str = ""
+    trigger_distance: float = field(default=2.0, metadata=bounds(ge=0.0, le=100.0))
+    meet_at: float = field(default=0.5, metadata=UNIT_INTERVAL)
 
     def __post_init__(self) -> None:
         check_fields(self)
         if not self.waypoints:
             raise SpecError(MEMORY, "waypoints", "needs at least 1 waypoint, got none")
+        if self.trigger not in TRIGGERS:
+            raise SpecError(MEMORY, "trigger", f"must be one of {', '.join(TRIGGERS)}, got "
+                            f"{self.trigger!r}{did_you_mean(self.trigger, TRIGGERS)}")
+        if self.trigger_vehicle and not SAFE_NAME.fullmatch(self.trigger_vehicle):
+            raise SpecError(MEMORY, "trigger_vehicle",
+                            f"must be a vehicle's name, got {self.trigger_vehicle!r}")
+        if self.trigger != "time" and len(self.waypoints) < 2:
+            raise SpecError(MEMORY, "waypoints", f"trigger '{self.trigger}' needs a first leg "
+                            "(two waypoints) that crosses the vehicle's path")
 
     @property
     def path_length(self) -> float:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scenarios.bench.triggers import PersonTriggers
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment
 from semistatic.fleet import FleetMapStore
@@ -78,6 +79,7 @@ class Scene:
     def __post_init__(self) -> None:
         self._segment_keys = {segment.name: segment.index for segment in self.segments}
         self._people: People | None = None
+        self._triggers: PersonTriggers | None = None
 
     @property
     def sim_time(self) -> float:
@@ -89,14 +91,20 @@ class Scene:
         return self._segment_keys[name]
 
     def add_people(self) -> None:
-        """Put the world's people into the simulation (after the vehicles' bodies)."""
+        """Put the world's people into the simulation (after the vehicles' bodies).
+
+        People a vehicle triggers watch the fleet from now on (:mod:`scenarios.bench.triggers`).
+        """
         # A world without people costs no per-tick call (person_positions stays empty).
         self._people = People(self.world) if self.world.people else None
+        self._triggers = PersonTriggers(self.world.people, self.fleet) if self._people else None
 
     def walk_people(self, lap_start: float) -> None:
         """Move the people to where they are now (their walks restart with each lap)."""
         if self._people is not None:
-            self.person_positions = self._people.update(self.sim.sim_time, lap_start=lap_start)
+            t = self.sim.sim_time
+            fired = self._triggers.update(t, lap_start) if self._triggers else None
+            self.person_positions = self._people.update(t, lap_start=lap_start, triggered=fired)
 
     def move_box(self, name: str, pose: tuple[float, float, float]) -> None:
         """Teleport box ``name`` to ``pose`` = (x, y, yaw)."""

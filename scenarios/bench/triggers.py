@@ -1,0 +1,155 @@
+"""People whose walk a vehicle triggers: emergence distance, or timed to meet the vehicle.
+
+A person with ``trigger = "distance"`` or ``"meet"`` (:class:`worlds.spec.PersonSpec`)
+stands at the first waypoint until the vehicle it watches comes: :class:`PersonTriggers`
+finds where the person's first leg crosses that vehicle's path once, then at every step
+compares the vehicle's progress with it.
+
+- ``distance``: fires when the vehicle's front is ``trigger_distance`` along its path
+  before the crossing (the person emerges ``d`` metres ahead of the vehicle).
+- ``meet``: fires when the vehicle, at its path speed, would reach the point ``M`` of the
+  first leg that lies ``(meet_at - 0.5)`` vehicle widths to the left of the path no
+  sooner than the person walking there: a straight walk meets the vehicle's front at
+  ``meet_at`` of its width (Euro NCAP's timing of pedestrian targets).
+
+A ``per_lap`` person's trigger re-arms when the lap starts. The vehicle's progress and
+path speed are what the vehicle itself knows (its follower); the geometry is the world's.
+
+Examples
+--------
+>>> import numpy as np
+>>> from robots.path import SplinePath
+>>> path = SplinePath([(0.0, 0.0), (5.0, 0.0), (10.0, 0.0)])
+>>> crossing_on_path(path, ((6.0, -2.0), (6.0, 2.0)))   # s, walk, sine and cosine
+(6.0, 2.0, 1.0, 0.0)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from robots.path import SplinePath
+from worlds.spec import PersonSpec
+
+__all__ = ["CROSSING_STEP", "Crossing", "PersonTriggers", "crossing_on_path"]
+
+CROSSING_STEP = 0.01
+"""Arc-length step (m) of the path polyline a first leg is intersected with."""
+
+
+def crossing_on_path(path: SplinePath,
+                     waypoints: tuple[tuple[float, float], ...],
+                     ) -> tuple[float, float, float, float]:
+    """Return where a person's first leg crosses ``path``.
+
+    ``(s, walk, sine, cosine)``: the path's arc length at the crossing (m), the distance
+    along the leg from the first waypoint to it (m), and the sine and cosine of the angle
+    from the path's heading to the leg's (positive sine: the person walks to the path's
+    left). Raises ``ValueError`` when the first leg does not cross the path.
+    """
+    count = max(2, math.ceil(path.length / CROSSING_STEP) + 1)
+    poses = path.pose(np.linspace(0.0, path.length, count))
+    line = shapely.LineString(poses[:, :2])
+    start, end = np.asarray(waypoints[0], dtype=float), np.asarray(waypoints[1], dtype=float)
+    crossing = shapely.intersection(line, shapely.LineString([start, end]))
+    if crossing.is_empty:
+        raise ValueError(f"the first leg {tuple(start)} -> {tuple(end)} does not cross the path")
+    point = np.asarray(shapely.get_coordinates(crossing)[0])
+    s = float(line.project(shapely.Point(point)))
+    heading = float(path.pose(s)[2])
+    leg = end - start
+    direction = leg / np.linalg.norm(leg)
+    sine = math.cos(heading) * direction[1] - math.sin(heading) * direction[0]
+    cosine = math.cos(heading) * direction[0] + math.sin(heading) * direction[1]
+    return (round(s, 6), round(float(np.linalg.norm(point - start)), 6),
+            round(float(sine), 6), round(float(cosine), 6) + 0.0)
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """A triggered person's geometry against one vehicle's path.
+
+    ``s`` is the arc length of the crossing on the vehicle's path, ``walk`` the distance
+    from the first waypoint to it along the leg, ``sine`` and ``cosine`` the leg's angle
+    to the path.
+    """
+
+    person: PersonSpec
+    vehicle: object
+    s: float
+    walk: float
+    sine: float
+    cosine: float
+
+
+class PersonTriggers:
+    """The trigger times of the people the vehicles of a scene trigger.
+
+    Parameters
+    ----------
+    people
+        Every person of the world (those with ``trigger = "time"`` are left alone).
+    fleet
+        The scene's vehicles (:class:`~scenarios.bench.vehicle.Vehicle`), the first one the
+        default for ``trigger_vehicle``.
+    """
+
+    def __init__(self, people, fleet) -> None:
+        vehicles = {vehicle.name: vehicle for vehicle in fleet}
+        self._crossings: list[Crossing] = []
+        for person in people:
+            if person.trigger == "time":
+                continue
+            vehicle = vehicles.get(person.trigger_vehicle) if person.trigger_vehicle \
+                else fleet[0]
+            if vehicle is None:
+                raise ValueError(f"person {person.name}: no vehicle named "
+                                 f"{person.trigger_vehicle!r} to trigger on")
+            s, walk, sine, cosine = crossing_on_path(vehicle.path, person.waypoints)
+            self._crossings.append(Crossing(person, vehicle, s, walk, sine, cosine))
+        self.fired: dict[str, float | None] = {c.person.name: None for c in self._crossings}
+        self._lap_start: float | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self._crossings)
+
+    def update(self, t: float, lap_start: float) -> dict[str, float | None]:
+        """Fire the triggers whose condition holds at run time ``t``; return every fire time."""
+        if lap_start != self._lap_start:
+            self._lap_start = lap_start
+            for crossing in self._crossings:
+                if crossing.person.per_lap:
+                    self.fired[crossing.person.name] = None
+        for crossing in self._crossings:
+            person, vehicle = crossing.person, crossing.vehicle
+            if self.fired[person.name] is not None or vehicle.done or vehicle.waiting:
+                continue
+            front = float(np.asarray(vehicle.robot.footprint)[:, 0].max())
+            ahead = crossing.s - (vehicle.follower.progress + front)
+            if person.trigger == "distance":
+                fire = ahead <= person.trigger_distance
+            else:
+                fire = self._meets(crossing, ahead, vehicle)
+            if fire:
+                self.fired[person.name] = t
+        return self.fired
+
+    @staticmethod
+    def _meets(crossing: Crossing, ahead: float, vehicle) -> bool:
+        """Return whether the person must set off now to meet the vehicle at ``meet_at``."""
+        person = crossing.person
+        footprint = np.asarray(vehicle.robot.footprint, dtype=float)
+        width = float(np.ptp(footprint[:, 1]))
+        centre = 0.5 * float(footprint[:, 1].min() + footprint[:, 1].max())
+        offset = centre + (person.meet_at - 0.5) * width   # left of the path, m
+        if abs(crossing.sine) < 1e-6:
+            return False  # a leg along the path never crosses it
+        along_leg = offset / crossing.sine            # from the crossing to M, on the leg
+        along_path = along_leg * crossing.cosine      # ... and M's place along the path
+        person_time = person.start_time + (crossing.walk + along_leg) / person.speed
+        vehicle_time = (ahead + along_path) / vehicle.follower.params.speed
+        return vehicle_time <= person_time
