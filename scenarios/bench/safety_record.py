@@ -14,7 +14,8 @@
   contact monitor reports it), ``near_miss`` (a person closer than
   ``safety.near_miss_distance`` without contact), ``person_in_protective_while_moving``
   (a person inside the segment's protective field while the vehicle drives faster than
-  ``safety.creep_speed``, for longer than the scanner's response time) and
+  ``safety.creep_speed`` and faster than it would if it had started braking one response
+  time after the person entered: the field did not stop it as it should) and
   ``unnecessary_stop`` (a protective stop with nothing in the field but semi-static boxes
   the vehicle had mapped).
 
@@ -41,7 +42,7 @@ import shapely
 
 from scenarios.bench.ground_truth import box_is_mapped
 from scenarios.bench.observer import Observer
-from scenarios.bench.records import LapLog, ScanRecord
+from scenarios.bench.records import ScanRecord
 from semistatic.frames import inverse, transform_points
 
 __all__ = ["KINDS", "SafetyRecord", "SafetyRecorder", "merged_record"]
@@ -57,6 +58,9 @@ CLOSING = 0.01
 
 MAPPED_DISTANCE = 0.05
 """A reading this close (m) to a box outline is a reading of that box."""
+
+BRAKING_SLACK = 0.1
+"""Speed (m/s) a braking vehicle may run above its expected braking profile."""
 
 
 @dataclass
@@ -113,21 +117,23 @@ class SafetyRecorder(Observer):
     Parameters
     ----------
     response_time
-        The scanner's response time (s): a person in the protective field of a moving
-        vehicle for longer than this is an infraction.
+        The scanner's response time (s), plus the command latency: when a person has been
+        in the protective field this long, the vehicle must be braking.
+    deceleration
+        The vehicle's braking deceleration (m/s^2), for the expected braking profile.
     """
 
-    def __init__(self, response_time: float) -> None:
+    def __init__(self, response_time: float, deceleration: float) -> None:
         self.record = SafetyRecord()
         self.response_time = float(response_time)
+        self.deceleration = float(deceleration)
         self._footprint: shapely.Polygon | None = None
         self._last_contacts = 0
         self._separations: dict[tuple[str, str], tuple[float, float]] = {}
         self._near: set[str] = set()
-        self._inside_since: dict[str, float] = {}
+        self._inside_since: dict[str, tuple[float, float]] = {}
         self._reported_inside: set[str] = set()
         self._zone = "free"
-        self._last_scan_t: float | None = None
         self._stop: dict | None = None
         self._box_revision = -1
         self._boxes: dict[str, shapely.Polygon] = {}
@@ -140,11 +146,11 @@ class SafetyRecorder(Observer):
         world = vehicle.world
         self._radii = {person.name: person.radius for person in world.people}
         self._walls = [shapely.Polygon(wall.corners()) for wall in world.walls]
+        vehicle.log.safety_record = self.record  # the live record: readable during the run
         self._separations.clear()
         self._near.clear()
         self._inside_since.clear()
         self._stop = None
-        self._last_scan_t = None
 
     def on_tick(self, vehicle) -> None:
         """Contacts, people's separations and the people inside the protective field."""
@@ -160,10 +166,9 @@ class SafetyRecorder(Observer):
     def on_scan(self, vehicle, record: ScanRecord) -> None:
         """Zones, stops, boxes and vehicles at every safety scan."""
         t = record.scan.stamp
-        if self._last_scan_t is not None:
-            self.record.time_in_zone_s[self._zone] += t - self._last_scan_t
-        self._last_scan_t = t
         zone = vehicle.zone
+        # Each scan stands for one scan period in its zone, as the lap logs count it.
+        self.record.time_in_zone_s[zone] += 1.0 / vehicle.spec.rates.safety_hz
         pose = vehicle.true_pose
         speed = float(vehicle.true_twist[0])
         if zone == "protective" and self._zone != "protective":
@@ -174,10 +179,6 @@ class SafetyRecorder(Observer):
         if self._stop is not None and abs(speed) < STANDSTILL:
             self._standstill(vehicle, pose)
         self._boxes_and_vehicles(vehicle, pose, t)
-
-    def on_lap_end(self, vehicle, lap_log: LapLog) -> None:
-        """Hand the record to the vehicle's run log."""
-        vehicle.log.safety_record = self.record
 
     # ------------------------------------------------------------------ pieces
     def _contact(self, vehicle, contact) -> None:
@@ -213,8 +214,11 @@ class SafetyRecorder(Observer):
                 self._near.discard(name)
             inside = shapely.distance(field, shapely.Point(centre)) <= radii[name]
             if inside and abs(speed) > settings.creep_speed:
-                since = self._inside_since.setdefault(name, t)
-                if t - since > self.response_time and name not in self._reported_inside:
+                since, entry_speed = self._inside_since.setdefault(name, (t, abs(speed)))
+                late = t - since - self.response_time
+                expected = entry_speed - self.deceleration * max(0.0, late)
+                if late > 0.0 and abs(speed) > expected + BRAKING_SLACK \
+                        and name not in self._reported_inside:
                     self._reported_inside.add(name)
                     self.record.infraction(
                         "person_in_protective_while_moving", t=t, vehicle=vehicle.name,

@@ -204,7 +204,8 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         for vehicle in self.fleet:
             vehicle.add_observer(GroundTruthScoring())
             vehicle.add_observer(Table1Reference())
-            vehicle.add_observer(SafetyRecorder(vehicle.fields.model.scanner_response_s))
+            model = vehicle.fields.model
+            vehicle.add_observer(SafetyRecorder(model.reaction_time, model.deceleration))
             if spec.sharing:  # alone, a vehicle publishes to a store of its own
                 vehicle.add_observer(SegmentPublisher(store, vehicle.index, segment_names=names))
         for observer in self.observers:

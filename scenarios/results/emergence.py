@@ -1,0 +1,165 @@
+"""Safe emergence distance: how far ahead a person may step into the path without contact.
+
+A person stands beside a straight path, outside the protective field, and steps into the
+vehicle's lane when the vehicle's front is ``d`` metres (along the path) before the
+person's crossing point (``trigger = "distance"``, :mod:`scenarios.bench.triggers`); the
+person then stands in the lane, as Sick's sizing assumes a person who sees the danger
+does. The *safe emergence distance* is the least ``d`` after which no contact follows.
+
+Predicted: the person reaches the protective field ``t_enter = (y0 - r - W/2) / v_p``
+after stepping out, the scanner confirms within its response time, the vehicle brakes;
+it stands ``v (t_enter + T) + B(v)`` after the emergence point (:class:`robots.stopping.
+StopModel`); the person's near edge is ``r`` before the crossing, and it must stay out of
+the laser's blind zone (``b`` ahead of the front, :func:`robots.stopping.blind_reach`),
+or the vehicle, seeing nothing, drives on once its field clears:
+
+    d_safe = v (t_enter + T) + B(v) + r + b.
+
+The trial's warning field is its protective field: no slowdown before the stop.
+
+Measured: :func:`emergence_trial` runs one trial, :func:`safe_emergence_distance` sweeps
+``d`` in steps over several seeds. A contact is never hidden: every trial reports its
+infractions.
+
+Examples
+--------
+>>> from robots.presets import PIONEER3DX
+>>> trial = emergence_trial(PIONEER3DX, speed=0.4, distance=1.5)
+>>> trial.contact, trial.infractions
+(False, ())
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from robots.presets import UGVSpec
+from robots.stopping import Supplements, blind_reach
+from scenarios.bench.testbench import Testbench
+from scenarios.spec.field_sizing import required_size, stop_model
+from scenarios.spec.scenario import SafetySettings, ScenarioSpec
+from semistatic.params import MapperParams
+from worlds.spec import PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
+
+__all__ = ["CROSSING_X", "EmergenceTrial", "emergence_corridor", "emergence_trial",
+           "predicted_safe_emergence", "safe_emergence_distance"]
+
+CROSSING_X = 8.0
+"""Where (m along the straight path) the person steps into the lane."""
+
+PATH_LENGTH = 14.0
+PERSON_RADIUS = 0.25
+WALKING_SPEED = 1.0
+"""m/s: a brisk walk (ISO 13855 takes 1.6 m/s for an approaching body)."""
+
+STANDING_CLEARANCE = 0.3
+"""Metres between the waiting person's body and the protective field's side."""
+
+
+@dataclass(frozen=True)
+class EmergenceTrial:
+    """One trial: emergence distance (m), contact with the person, the run's infractions.
+
+    ``infractions`` are ``(kind, detail)`` pairs; ``min_separation`` the least distance (m)
+    between the vehicle and the person.
+    """
+
+    distance: float
+    seed: int
+    contact: bool
+    min_separation: float | None
+    infractions: tuple[tuple[str, str], ...]
+
+
+def _supplements(robot: UGVSpec) -> Supplements:
+    laser = robot.safety_laser.laser
+    # The corridor's posts stand 2.4 m from the path: no reflector supplement.
+    return Supplements(laser.general_supplement, 0.0, 0.15 if robot.ground_clearance < 0.12
+                       else 0.0)
+
+
+def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
+                       walking_speed: float = WALKING_SPEED) -> WorldSpec:
+    """Return the corridor of one trial: formula-sized fields, a person to the right."""
+    spec = ScenarioSpec(name="emergence", world="emergence", robot=robot.name)
+    length, width = required_size(stop_model(spec, robot), _supplements(robot), robot, speed)
+    front = max(x for x, _ in robot.footprint)
+    half = 2.5
+    x0, x1 = -3.0, PATH_LENGTH + 3.0
+    walls = (WallSpec((x0, -half), (x1, -half)), WallSpec((x0, half), (x1, half)),
+             WallSpec((x0, -half), (x0, half)), WallSpec((x1, -half), (x1, half)))
+    xs = (-2.2, -0.4, 1.3, 3.4, 4.9, 7.1, 8.6, 10.9, 12.2, 14.6, 16.3)
+    posts = (*(PostSpec(x, -2.39) for x in xs),
+             *(PostSpec(x + 0.7 + 0.13 * (i % 3), 2.39) for i, x in enumerate(xs)),
+             PostSpec(x0 + 0.11, 0.4), PostSpec(x1 - 0.11, -0.6))
+    protective = ((front, -width / 2), (front + length, -width / 2),
+                  (front + length, width / 2), (front, width / 2))
+    # The warning field is the protective one: no slowdown before the stop, the worst case.
+    segment = SegmentSpec("straight", 0, 2, warning=protective, protective=protective)
+    path = PathSpec(((0.0, 0.0), (PATH_LENGTH / 2, 0.0), (PATH_LENGTH, 0.0)), (segment,),
+                    speed=speed)
+    y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
+    person = PersonSpec("worker", ((CROSSING_X, -y0), (CROSSING_X, 0.0)),
+                        radius=PERSON_RADIUS, speed=walking_speed, trigger="distance",
+                        trigger_distance=distance)
+    return WorldSpec(name="emergence", walls=walls, posts=posts, boxes=(), people=(person,),
+                     path=path, description="scenarios.results.emergence")
+
+
+def predicted_safe_emergence(robot: UGVSpec, speed: float,
+                             walking_speed: float = WALKING_SPEED) -> float:
+    """Return the predicted safe emergence distance (m) of the corridor's trial."""
+    spec = ScenarioSpec(name="emergence", world="emergence", robot=robot.name)
+    model = stop_model(spec, robot)
+    _, width = required_size(model, _supplements(robot), robot, speed)
+    y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
+    t_enter = max(0.0, y0 - PERSON_RADIUS - width / 2) / walking_speed
+    footprint = np.asarray(robot.footprint, dtype=float)
+    mount = robot.safety_laser
+    # Standing, the vehicle must still see the person: beyond its laser's blind zone.
+    blind = blind_reach(footprint, mount.x, mount.laser.range_min)
+    return speed * (t_enter + model.reaction_time) + model.braking_distance(speed) \
+        + PERSON_RADIUS + blind
+
+
+def emergence_trial(robot: UGVSpec, speed: float, distance: float, *, seed: int = 0,
+                    policy: str = "conservative",
+                    walking_speed: float = WALKING_SPEED) -> EmergenceTrial:
+    """Run one trial with emergence distance ``distance`` (m); report what happened."""
+    spec = ScenarioSpec(name="emergence", world="emergence", robot=robot.name, laps=1,
+                        seed=seed, policy=policy, lap_timeout=120.0, people=("worker",),
+                        safety=SafetySettings(undersized_fields=True),
+                        mapper=MapperParams(hausdorff_restriction="projection"))
+    world = emergence_corridor(robot, speed, distance, walking_speed)
+    with Testbench(spec, world=world, robot=robot) as bench:
+        log = bench.run()
+    record = log.safety_record
+    infractions = tuple((item["kind"], item["detail"]) for item in record.infractions)
+    contact = any(kind == "contact" for kind, _ in infractions)
+    return EmergenceTrial(distance, seed, contact, record.min_separation["person"], infractions)
+
+
+def safe_emergence_distance(robot: UGVSpec, speed: float, distances: Sequence[float],
+                            seeds: Sequence[int], *, policy: str = "conservative",
+                            walking_speed: float = WALKING_SPEED,
+                            ) -> tuple[float | None, list[EmergenceTrial]]:
+    """Return the safe emergence distance among ``distances`` and every trial.
+
+    The least swept distance with no contact in any seed such that every larger one is
+    contact-free too (``None``: even the largest saw a contact).
+    """
+    trials = [emergence_trial(robot, speed, d, seed=seed, policy=policy,
+                              walking_speed=walking_speed)
+              for d in distances for seed in seeds]
+    safe = {d: not any(t.contact for t in trials if t.distance == d) for d in distances}
+    ordered = sorted(distances)
+    boundary = None
+    for d in reversed(ordered):
+        if not safe[d]:
+            break
+        boundary = d
+    return boundary, trials
+
