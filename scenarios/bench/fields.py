@@ -30,12 +30,8 @@ import shapely
 from robots.presets import UGVSpec
 from robots.safety import SafetyOutput, SafetyPolicy, SafetySupervisor
 from robots.stopping import minimum_protective_field
-from scenarios.bench.policies import (
-    FieldView,
-    checked_readings,
-    counted_occupancy,
-    field_policy,
-)
+from scenarios.bench.bundled_policies import field_policy
+from scenarios.bench.policies import FieldView, checked_readings, counted_occupancy
 from scenarios.spec.field_sizing import field_checks, required_size, stop_model
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments
@@ -86,6 +82,7 @@ class VehicleFields:
                              for check in field_checks(spec, route, robot)}
         self._fixed = {segment.name: _first_depth(segment, safety.min_protective_depth)
                        for segment in segments}
+        self._walls = tuple(wall.corners() for wall in route.walls)
         self._travelled = 0.0  # forward travel (m, encoders) since the last safety scan
         self._since = 0.0      # ... and that scan's time
 
@@ -116,17 +113,27 @@ class VehicleFields:
 
     def supervise(self, points: np.ndarray, segment: PathSegment, stamp: float,
                   local_map: LocalMap, ekf_pose: np.ndarray) -> SafetyOutput:
-        """Return the supervisor's answer to one scan's robot-frame ``points``."""
-        supervisor = self.supervisor
+        """Return the supervisor's answer to one scan's robot-frame ``points``.
+
+        The speed scale is the supervisor's, capped by the policy's ``speed_cap``.
+        """
+        supervisor, policy = self.supervisor, self.policy
         if supervisor.field_set is not segment.fields:
             supervisor.set_fields(segment.fields)
         minimum = self.minimum_field(segment.name, abs(self.measured_speed(stamp)))
-        answer = self.policy.counted_readings(
-            FieldView(points, segment, minimum, ekf_pose, local_map, self.settings))
-        readings = checked_readings(self.policy, answer, len(points))
+        view = FieldView(points, segment, minimum, ekf_pose, local_map, self.settings,
+                         self._walls)
+        readings = checked_readings(policy, policy.counted_readings(view), len(points))
         occupancy = counted_occupancy(points, segment.fields, minimum, readings,
                                       supervisor.policy.min_points)
-        return supervisor.update(occupancy, stamp)
+        output = supervisor.update(occupancy, stamp)
+        cap = policy.speed_cap(view)
+        if cap is not None and cap < output.speed_scale:
+            if not 0.0 <= cap <= 1.0:
+                raise ValueError(f"policy {policy.name!r}: speed_cap(view) must be in [0, 1], "
+                                 f"got {cap!r}")
+            return SafetyOutput(cap, output.zone)
+        return output
 
 
 def _first_depth(segment: PathSegment, depth: float) -> shapely.Geometry:

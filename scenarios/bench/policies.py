@@ -14,9 +14,12 @@ standard's formula asks for at the measured speed, and the footprint grown by th
 laser's general supplement on every side (:mod:`scenarios.bench.fields`). So a person in
 front of or beside the vehicle always stops it, and a policy sees read-only readings.
 
+A policy may also cap the vehicle's speed (``speed_cap(view)``, a fraction of the path
+speed), e.g. where a known object could hide a person.
+
 Write a policy as a subclass of :class:`FieldPolicy` with a ``name`` and a
-``counted_readings(view)`` method (and, where it needs them, the hooks ``start_lap`` and
-``refresh_segment``)::
+``counted_readings(view)`` method (and, where it needs them, the hooks ``start_lap``,
+``refresh_segment`` and ``speed_cap``)::
 
     class IgnoreWarning(FieldPolicy):
         name = "ignore-warning"
@@ -25,18 +28,12 @@ Write a policy as a subclass of :class:`FieldPolicy` with a ``name`` and a
             none = np.zeros(len(view.points), dtype=bool)
             return FieldReadings(warning=none, protective=None)
 
-Two policies are bundled: ``conservative`` (every reading counts) and ``adaptive`` (the
-readings explained by semi-static objects confirmed in earlier laps do not count).
+The bundled policies are in :mod:`scenarios.bench.bundled_policies`.
 
 Examples
 --------
->>> field_policy("adaptive").name
-'adaptive'
->>> field_policy("cautious")
-Traceback (most recent call last):
-...
-ValueError: policy: unknown field policy 'cautious'; bundled: conservative, adaptive \
-(or pass a scenarios.FieldPolicy object)
+>>> FieldReadings(warning=np.array([True, False])).protective is None
+True
 """
 
 from __future__ import annotations
@@ -49,23 +46,17 @@ import numpy as np
 import shapely
 
 from robots.safety import FieldSet, FieldState, points_inside
-from scenarios.spec.scenario import POLICIES, SafetySettings
+from scenarios.spec.scenario import SafetySettings
 from scenarios.spec.segments import PathSegment
-from semistatic.adaptation import explained_readings
-from semistatic.frames import transform_points
 from semistatic.local_map import LocalMap
 
 __all__ = [
     "ALL_READINGS",
-    "AdaptivePolicy",
-    "ConservativePolicy",
     "FieldPolicy",
     "FieldReadings",
     "FieldView",
     "checked_readings",
     "counted_occupancy",
-    "field_policy",
-    "known_objects",
     "policy_name",
 ]
 
@@ -91,6 +82,8 @@ class FieldView:
         The segment's local map as it stands before this scan's update.
     settings
         The scenario's safety settings (``adaptive_margin`` and the others).
+    walls
+        The static map the vehicle knows: every wall's ``(4, 2)`` outline, world frame.
 
     Examples
     --------
@@ -112,6 +105,7 @@ class FieldView:
     robot_pose: np.ndarray
     local_map: LocalMap
     settings: SafetySettings
+    walls: tuple[np.ndarray, ...] = ()
 
     def __post_init__(self) -> None:
         # A copy the policy may look at but not write: the vehicle counts its own.
@@ -150,8 +144,8 @@ class FieldPolicy(abc.ABC):
     ...     name = "ignore-warning"
     ...     def counted_readings(self, view):
     ...         return FieldReadings(warning=np.zeros(len(view.points), dtype=bool))
-    >>> field_policy(IgnoreWarning()).name
-    'ignore-warning'
+    >>> IgnoreWarning().speed_cap(None) is None   # the hooks it does not override: no-ops
+    True
     """
 
     name: str = ""
@@ -167,131 +161,9 @@ class FieldPolicy(abc.ABC):
     def refresh_segment(self, name: str, local_map: LocalMap) -> None:  # noqa: B027 (a hook)
         """Take segment ``name``'s map: it was just merged with what the fleet shares."""
 
-
-class ConservativePolicy(FieldPolicy):
-    """Every reading counts: the fields as configured, whatever the local maps know.
-
-    Examples
-    --------
-    >>> ConservativePolicy().counted_readings(None) is None
-    True
-    """
-
-    name = "conservative"
-
-    def counted_readings(self, view: FieldView) -> FieldReadings | None:
-        """Return ``None``: every reading counts for both fields."""
+    def speed_cap(self, view: FieldView) -> float | None:
+        """Return a cap on the speed, a fraction of the path speed in [0, 1] (``None``: none)."""
         return None
-
-
-class AdaptivePolicy(FieldPolicy):
-    """Readings explained by known semi-static objects do not count (paper Sec. 4).
-
-    At each lap start the policy takes the *confirmed* polylines of every segment's local
-    map (:func:`known_objects`); during the lap, a reading within
-    ``settings.adaptive_margin`` of one of its segment's known objects no longer counts
-    for either field. The known objects stay fixed for the lap: what the robot learns
-    now serves the next lap.
-
-    Examples
-    --------
-    >>> policy = AdaptivePolicy()
-    >>> local_map = LocalMap()
-    >>> _ = local_map.add([[1.0, -1.0], [1.0, 1.0]])
-    >>> policy.start_lap({"a": local_map})
-    >>> policy.known["a"]   # a polyline seen once is not confirmed yet
-    []
-    """
-
-    name = "adaptive"
-
-    def __init__(self) -> None:
-        self.known: dict[str, list[np.ndarray]] = {}
-
-    def start_lap(self, local_maps: Mapping[str, LocalMap]) -> None:
-        """Take the confirmed objects of every segment's map as they stand now."""
-        self.known = {name: known_objects(local_map) for name, local_map in local_maps.items()}
-
-    def refresh_segment(self, name: str, local_map: LocalMap) -> None:
-        """Take segment ``name``'s confirmed objects now (its map was merged with the fleet's).
-
-        A vehicle calls this as it enters a segment whose map it fetched from the fleet
-        map store: what another vehicle confirmed serves this vehicle's fields at once.
-
-        Examples
-        --------
-        >>> import dataclasses
-        >>> policy = AdaptivePolicy()
-        >>> shared = LocalMap()
-        >>> _ = shared.add([[1.0, -1.0], [1.0, 1.0]])
-        >>> shared.restore(dataclasses.replace(shared[0], status="confirmed"), replace=True)
-        >>> policy.refresh_segment("a", shared)
-        >>> len(policy.known["a"])
-        1
-        """
-        self.known[name] = known_objects(local_map)
-
-    def counted_readings(self, view: FieldView) -> FieldReadings | None:
-        """Return the readings not explained by a known object of the view's segment."""
-        known = self.known.get(view.segment.name)
-        if not known:
-            return None
-        world_points = transform_points(view.robot_pose, view.points)
-        unexplained = ~explained_readings(world_points, known, view.settings.adaptive_margin)
-        return FieldReadings(warning=unexplained, protective=unexplained)
-
-
-def known_objects(local_map: LocalMap) -> list[np.ndarray]:
-    """Return the confirmed semi-static objects of a local map (world frame) for adaptation.
-
-    Only ``confirmed`` polylines count: seen again after their first scan, so a person
-    who walked past once is not "known" and never shrinks a field.
-
-    Examples
-    --------
-    >>> local_map = LocalMap()
-    >>> _ = local_map.add([[1.0, 0.0], [1.0, 1.0]])
-    >>> known_objects(local_map)
-    []
-    """
-    return [
-        line.points
-        for map_id, line in local_map.world_polylines().items()
-        if local_map[map_id].status == "confirmed"
-    ]
-
-
-_BUNDLED = {"conservative": ConservativePolicy, "adaptive": AdaptivePolicy}
-assert tuple(_BUNDLED) == POLICIES
-
-
-def field_policy(policy: str | FieldPolicy) -> FieldPolicy:
-    """Return a fresh bundled policy by name, or ``policy`` itself if it is a policy object.
-
-    Raises ``ValueError`` naming ``policy`` for an unknown name or an object that does not
-    follow :class:`FieldPolicy`.
-
-    Examples
-    --------
-    >>> field_policy("conservative").name
-    'conservative'
-    >>> custom = ConservativePolicy()
-    >>> field_policy(custom) is custom
-    True
-    """
-    if isinstance(policy, str):
-        if policy not in _BUNDLED:
-            raise ValueError(
-                f"policy: unknown field policy {policy!r}; bundled: {', '.join(POLICIES)} "
-                "(or pass a scenarios.FieldPolicy object)"
-            )
-        return _BUNDLED[policy]()
-    if not isinstance(policy, FieldPolicy) or not (isinstance(policy.name, str) and policy.name):
-        raise ValueError(
-            f"policy: {policy!r} is no field policy: subclass scenarios.FieldPolicy, give it "
-            "a name (str) and a counted_readings(view) method"
-        )
-    return policy
 
 
 def policy_name(policy: str | FieldPolicy) -> str:
@@ -299,8 +171,12 @@ def policy_name(policy: str | FieldPolicy) -> str:
 
     Examples
     --------
-    >>> policy_name("adaptive"), policy_name(ConservativePolicy())
-    ('adaptive', 'conservative')
+    >>> class Mine(FieldPolicy):
+    ...     name = "mine"
+    ...     def counted_readings(self, view):
+    ...         return None
+    >>> policy_name("adaptive"), policy_name(Mine())
+    ('adaptive', 'mine')
     """
     return policy if isinstance(policy, str) else str(policy.name)
 
@@ -314,12 +190,16 @@ def checked_readings(policy: FieldPolicy, readings: object, count: int) -> Field
 
     Examples
     --------
-    >>> checked_readings(ConservativePolicy(), FieldReadings(np.ones(2, dtype=bool)), 2)
+    >>> class Mine(FieldPolicy):
+    ...     name = "mine"
+    ...     def counted_readings(self, view):
+    ...         return None
+    >>> checked_readings(Mine(), FieldReadings(np.ones(2, dtype=bool)), 2)
     FieldReadings(warning=array([ True,  True]), protective=None)
-    >>> checked_readings(ConservativePolicy(), FieldReadings(np.ones(3, dtype=int)), 3)
+    >>> checked_readings(Mine(), FieldReadings(np.ones(3, dtype=int)), 3)
     Traceback (most recent call last):
     ...
-    TypeError: policy 'conservative': counted_readings(view).warning must be None or a \
+    TypeError: policy 'mine': counted_readings(view).warning must be None or a \
 (3,) bool array (one entry per view.points row), got int64 array of shape (3,)
     """
     if readings is None:

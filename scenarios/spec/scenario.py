@@ -39,7 +39,7 @@ MAX_LAP_TIMEOUT = 3600.0
 MAX_START_TIME = 3600.0
 """Latest start of a fleet vehicle (s): an hour of the others driving alone."""
 
-POLICIES = ("conservative", "adaptive")
+POLICIES = ("conservative", "adaptive", "guarded")
 BOX_ACTIONS = ("move", "add", "remove")
 
 
