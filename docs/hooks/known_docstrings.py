@@ -26,7 +26,7 @@ class _KnownDocstrings(logging.Filter):
         return True
 
 
-def on_startup(command, dirty):  # noqa: ARG001 (the hook's signature)
-    """Install the filter on the loggers griffe's warnings pass through."""
+def on_startup(*, command, dirty):
+    """Install the filter on the loggers griffe's warnings pass through (any command)."""
     for name in ("mkdocs", "mkdocs.plugins", "mkdocs.plugins.griffe", "griffe"):
         logging.getLogger(name).addFilter(_KnownDocstrings())
