@@ -137,6 +137,36 @@ def test_design_page_keeps_the_anchors_the_code_cites():
     assert not missing, f"docs/design.md lost the anchors {missing}"
 
 
+def test_api_pages_list_every_public_module():
+    """A module added or renamed in the code needs its line on an API page (docs/api/)."""
+    listed = set()
+    for page in (DOCS / "api").glob("*.md"):
+        listed |= set(re.findall(r"^::: ([\w.]+)", page.read_text(encoding="utf-8"), re.M))
+    modules = set()
+    for package in PRODUCT_PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            if not any(part.startswith("_") for part in parts):
+                modules.add(".".join(parts))
+    unlisted, gone = sorted(modules - listed), sorted(listed - modules)
+    assert not unlisted, "add to docs/api/: " + ", ".join(unlisted)
+    assert not gone, "gone from the code, drop from docs/api/: " + ", ".join(gone)
+
+
+def test_design_anchors_the_code_cites_exist():
+    text = (DOCS / "design.md").read_text(encoding="utf-8")
+    anchors = set(re.findall(r"\{#([\w-]+)\}", text))
+    cited = {
+        (path.relative_to(ROOT), anchor)
+        for path in product_files()
+        for anchor in re.findall(r"design\.md#([\w-]+)", path.read_text(encoding="utf-8"))
+    }
+    missing = sorted(f"{path}: #{anchor}" for path, anchor in cited if anchor not in anchors)
+    assert not missing, "docs/design.md has no such anchor:\n" + "\n".join(missing)
+
+
 def _missing_site_packages() -> list[str]:
     """The packages the site build needs that are not installed."""
     needed = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers")
