@@ -39,6 +39,8 @@ class SegmentPublisher(Observer):
         The fleet's segment names in path order (a message names a segment by its place
         there); default: the vehicle's segments.
 
+    Notes
+    -----
     The last segment of the last lap is published when the run ends. The traffic totals
     and per-message arrays go to ``vehicle.log.sharing`` at every lap end.
 

@@ -96,15 +96,15 @@ class Testbench:
         Open PyBullet's window (the camera follows the robot; fields, laser returns and
         local maps are drawn).
 
+    Notes
+    -----
     Life cycle: :meth:`reset` builds the simulation and starts lap 1; :meth:`step`
     advances one physics tick; :meth:`run_lap` and :meth:`run` advance to the end of the
     lap or of the run; :meth:`close` (or leaving a ``with`` block) frees PyBullet. Between
-    laps the robot is carried back to the start and the scenario's box moves for the next
-    lap are applied; :meth:`move_box`, :meth:`add_box` and :meth:`remove_box` change the
-    boxes at any moment (until the scenario's next lap layout replaces them).
-
-    Observers (:class:`~scenarios.bench.observer.Observer`) added before :meth:`reset` see
-    lap 1 start; the bench hands them itself.
+    laps the robot is carried back to the start and the next lap's box moves applied;
+    :meth:`move_box`, :meth:`add_box` and :meth:`remove_box` change the boxes at any
+    moment. Observers added before :meth:`reset` see lap 1 start; the bench hands them
+    itself (:class:`~scenarios.bench.observer.Observer`).
 
     Examples
     --------
