@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from robots.stopping import StopModel
 from scenarios.bench.ground_truth import box_is_mapped
 from scenarios.bench.observer import Observer
 from scenarios.bench.records import ScanRecord
@@ -116,17 +117,16 @@ class SafetyRecorder(Observer):
 
     Parameters
     ----------
-    response_time
-        The scanner's response time (s), plus the command latency: when a person has been
-        in the protective field this long, the vehicle must be braking.
-    deceleration
-        The vehicle's braking deceleration (m/s^2), for the expected braking profile.
+    model
+        How the vehicle stops (:class:`robots.stopping.StopModel`): when a person has been
+        in the protective field for its reaction time, the vehicle must be braking at its
+        deceleration.
     """
 
-    def __init__(self, response_time: float, deceleration: float) -> None:
+    def __init__(self, model: StopModel) -> None:
         self.record = SafetyRecord()
-        self.response_time = float(response_time)
-        self.deceleration = float(deceleration)
+        self.response_time = model.reaction_time
+        self.deceleration = model.deceleration
         self._footprint: shapely.Polygon | None = None
         self._last_contacts = 0
         self._separations: dict[tuple[str, str], tuple[float, float]] = {}

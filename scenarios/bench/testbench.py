@@ -196,16 +196,14 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
                                        vehicle_route(base_world, vehicle),
                                        store=store, start_time=vehicle.start_time))
         self.fleet: list[Vehicle] = scene.fleet
-        self.vehicles: Mapping[str, Vehicle] = MappingProxyType(
-            {vehicle.name: vehicle for vehicle in self.fleet})
+        self.vehicles: Mapping[str, Vehicle] = MappingProxyType({v.name: v for v in self.fleet})
         if self.fleet_size == 1:
             self.fleet[0].log = self.log  # the run's log is the vehicle's
         names = [segment.name for segment in segments]
-        for vehicle in self.fleet:
+        for vehicle in self.fleet:  # each vehicle's own scoring
             vehicle.add_observer(GroundTruthScoring())
             vehicle.add_observer(Table1Reference())
-            model = vehicle.fields.model
-            vehicle.add_observer(SafetyRecorder(model.reaction_time, model.deceleration))
+            vehicle.add_observer(SafetyRecorder(vehicle.fields.model))
             if spec.sharing:  # alone, a vehicle publishes to a store of its own
                 vehicle.add_observer(SegmentPublisher(store, vehicle.index, segment_names=names))
         for observer in self.observers:
