@@ -17,12 +17,10 @@ robot carried back to the start (it re-localises) and the boxes changed as the s
 says, "while the robot is not observing". The tick does what the robot does; ground
 truth is read only by observers (scoring, Table 1, recording, progress).
 
-A scenario with ``[[vehicles]]`` drives a fleet in one world: each vehicle
-(:class:`~scenarios.bench.vehicle.Vehicle`, ``bench.vehicles`` by name) runs the tick above
-with its own stack, laps and scoring observers, and all share the bench's
-:class:`~scenarios.bench.scene.Scene`. The bench is the
-:class:`~scenarios.bench.observer.VehicleView` of its first vehicle, whose lap starts bring
-the box moves; a vehicle done with its laps parks outside (:mod:`scenarios.bench.fleet`).
+With ``[[vehicles]]`` a fleet shares the :class:`~scenarios.bench.scene.Scene`; each
+:class:`~scenarios.bench.vehicle.Vehicle` (``bench.vehicles``) runs the tick above with its
+own stack, laps and scoring. The bench is its first vehicle's
+:class:`~scenarios.bench.observer.VehicleView`; a vehicle done parks outside.
 numba compiles the mapper's kernels on first use; :func:`semistatic.kernel_cache.
 warm_kernel_cache` compiles them ahead on every core (the CLI does; ``reset`` does not).
 
