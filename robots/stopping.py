@@ -55,6 +55,7 @@ __all__ = [
     "required_field",
     "response_time",
     "stopping_distance",
+    "visible_distance",
 ]
 
 FLAT_GROUND_CLEARANCE = 0.12
@@ -276,3 +277,33 @@ def minimum_protective_field(footprint: ArrayLike, length: float, width: float,
     outline = np.asarray(footprint, dtype=float).reshape(-1, 2)
     around = shapely.buffer(shapely.Polygon(outline), general_supplement)
     return shapely.union(required_field(outline, length, width), around)
+
+
+def visible_distance(range_min: float, angular_resolution: float, radius: float,
+                     min_points: int) -> float:
+    """Return the least distance (m) at which a scanner still sees a round body ahead.
+
+    A body of ``radius`` (m) centred straight ahead at distance ``D`` is seen by the beams
+    (``angular_resolution`` rad apart, one on the centre line) that hit its outline at a
+    range of at least ``range_min``: near the scanner only the edges of its silhouette are
+    that far. It counts as seen with ``min_points`` such beams. Closer, a vehicle that
+    stopped for the body no longer sees it and drives on once its field clears.
+
+    Examples
+    --------
+    >>> round(visible_distance(0.05, math.radians(0.5), 0.25, 3), 3)   # an S300: at once
+    0.26
+    >>> round(visible_distance(0.5, math.radians(0.5), 0.25, 3), 3)    # an LMS100
+    0.61
+    """
+    step = 0.001
+    distance = max(range_min, radius) + step
+    while True:
+        beams = np.arange(0.0, math.asin(radius / distance), angular_resolution)
+        beams = np.concatenate([-beams[1:], beams])
+        along = distance * np.cos(beams)
+        across = distance * np.sin(beams)
+        ranges = along - np.sqrt(np.maximum(radius * radius - across * across, 0.0))
+        if np.count_nonzero(ranges >= range_min) >= min_points:
+            return distance
+        distance += step

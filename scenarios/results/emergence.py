@@ -9,11 +9,12 @@ does. The *safe emergence distance* is the least ``d`` after which no contact fo
 Predicted: the person reaches the protective field ``t_enter = (y0 - r - W/2) / v_p``
 after stepping out, the scanner confirms within its response time, the vehicle brakes;
 it stands ``v (t_enter + T) + B(v)`` after the emergence point (:class:`robots.stopping.
-StopModel`); the person's near edge is ``r`` before the crossing, and it must stay out of
-the laser's blind zone (``b`` ahead of the front, :func:`robots.stopping.blind_reach`),
-or the vehicle, seeing nothing, drives on once its field clears:
+StopModel`). The person standing in the lane must be ``r`` ahead of its front, and still
+seen by the safety laser (``c`` ahead of its front: the mount plus
+:func:`robots.stopping.visible_distance`, which a laser with a blind zone needs), or the
+vehicle, seeing nothing, drives on once its field clears:
 
-    d_safe = v (t_enter + T) + B(v) + r + b.
+    d_safe = v (t_enter + T) + B(v) + max(r, c).
 
 The trial's warning field is its protective field: no slowdown before the stop.
 
@@ -37,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robots.presets import UGVSpec
-from robots.stopping import Supplements, blind_reach
+from robots.stopping import Supplements, visible_distance
 from scenarios.bench.testbench import Testbench
 from scenarios.spec.field_sizing import required_size, stop_model
 from scenarios.spec.scenario import SafetySettings, ScenarioSpec
@@ -117,12 +118,13 @@ def predicted_safe_emergence(robot: UGVSpec, speed: float,
     _, width = required_size(model, _supplements(robot), robot, speed)
     y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
     t_enter = max(0.0, y0 - PERSON_RADIUS - width / 2) / walking_speed
-    footprint = np.asarray(robot.footprint, dtype=float)
-    mount = robot.safety_laser
-    # Standing, the vehicle must still see the person: beyond its laser's blind zone.
-    blind = blind_reach(footprint, mount.x, mount.laser.range_min)
+    front = float(np.asarray(robot.footprint, dtype=float)[:, 0].max())
+    mount, laser = robot.safety_laser, robot.safety_laser.laser
+    # Standing, the vehicle must still see the person, or it drives on.
+    seen = mount.x + visible_distance(laser.range_min, laser.angular_resolution,
+                                      PERSON_RADIUS, SafetySettings().min_points) - front
     return speed * (t_enter + model.reaction_time) + model.braking_distance(speed) \
-        + PERSON_RADIUS + blind
+        + max(PERSON_RADIUS, seen)
 
 
 def emergence_trial(robot: UGVSpec, speed: float, distance: float, *, seed: int = 0,
