@@ -48,10 +48,10 @@ from worlds.spec import PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, W
 __all__ = ["CROSSING_X", "EmergenceTrial", "emergence_corridor", "emergence_trial",
            "predicted_safe_emergence", "safe_emergence_distance"]
 
-CROSSING_X = 8.0
+CROSSING_X = 4.5
 """Where (m along the straight path) the person steps into the lane."""
 
-PATH_LENGTH = 14.0
+PATH_LENGTH = 7.0
 PERSON_RADIUS = 0.25
 WALKING_SPEED = 1.0
 """m/s: a brisk walk (ISO 13855 takes 1.6 m/s for an approaching body)."""
@@ -92,7 +92,7 @@ def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
     x0, x1 = -3.0, PATH_LENGTH + 3.0
     walls = (WallSpec((x0, -half), (x1, -half)), WallSpec((x0, half), (x1, half)),
              WallSpec((x0, -half), (x0, half)), WallSpec((x1, -half), (x1, half)))
-    xs = (-2.2, -0.4, 1.3, 3.4, 4.9, 7.1, 8.6, 10.9, 12.2, 14.6, 16.3)
+    xs = (-2.2, -0.4, 1.3, 3.4, 4.9, 7.1, 8.6)
     posts = (*(PostSpec(x, -2.39) for x in xs),
              *(PostSpec(x + 0.7 + 0.13 * (i % 3), 2.39) for i, x in enumerate(xs)),
              PostSpec(x0 + 0.11, 0.4), PostSpec(x1 - 0.11, -0.6))
