@@ -245,11 +245,11 @@ class PersonSpec:
     person stands at ``waypoints[0]`` (e.g. hidden behind a box) until
 
     - ``"distance"``: the vehicle's front is ``trigger_distance`` (m) along its path
-      before the point where the person's first leg crosses the path: the *emergence
+      before the point where the person's walk crosses the path: the *emergence
       distance*;
-    - ``"meet"``: a straight walk along the first leg at ``speed`` would meet the
-      vehicle's front at ``meet_at`` of its width (0 its right corner, 1 its left) if the
-      vehicle kept its path speed (as Euro NCAP times its pedestrian targets);
+    - ``"meet"``: the walk at ``speed`` would meet the vehicle's front at ``meet_at`` of
+      its width (0 its right corner, 1 its left) if the vehicle kept its path speed (as
+      Euro NCAP times its pedestrian targets);
 
     then waits ``start_time`` more seconds and walks. A person walks at ``speed`` (m/s) to
     the last waypoint and stays there (or loops back to the first when ``loop``); a
@@ -321,8 +321,8 @@ class PersonSpec:
             raise SpecError(MEMORY, "trigger_vehicle",
                             f"must be a vehicle's name, got {self.trigger_vehicle!r}")
         if self.trigger != "time" and len(self.waypoints) < 2:
-            raise SpecError(MEMORY, "waypoints", f"trigger '{self.trigger}' needs a first leg "
-                            "(two waypoints) that crosses the vehicle's path")
+            raise SpecError(MEMORY, "waypoints", f"trigger '{self.trigger}' needs a walk "
+                            "(two waypoints or more) that crosses the vehicle's path")
 
     @property
     def path_length(self) -> float:

@@ -2,14 +2,15 @@
 
 A person with ``trigger = "distance"`` or ``"meet"`` (:class:`worlds.spec.PersonSpec`)
 stands at the first waypoint until the vehicle it watches comes: :class:`PersonTriggers`
-finds where the person's first leg crosses that vehicle's path once, then at every step
-compares the vehicle's progress with it.
+finds where the person's walk first crosses that vehicle's path once (e.g. out from
+behind a box, along it, then into the lane), then at every step compares the vehicle's
+progress with it.
 
 - ``distance``: fires when the vehicle's front is ``trigger_distance`` along its path
   before the crossing (the person emerges ``d`` metres ahead of the vehicle).
 - ``meet``: fires when the vehicle, at its path speed, would reach the point ``M`` of the
-  first leg that lies ``(meet_at - 0.5)`` vehicle widths to the left of the path no
-  sooner than the person walking there: a straight walk meets the vehicle's front at
+  crossing leg that lies ``(meet_at - 0.5)`` vehicle widths to the left of the path no
+  sooner than the person walking there: the walk meets the vehicle's front at
   ``meet_at`` of its width (Euro NCAP's timing of pedestrian targets).
 
 A ``per_lap`` person's trigger re-arms when the lap starts. The vehicle's progress and
@@ -26,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -44,29 +46,34 @@ CROSSING_STEP = 0.01
 def crossing_on_path(path: SplinePath,
                      waypoints: tuple[tuple[float, float], ...],
                      ) -> tuple[float, float, float, float]:
-    """Return where a person's first leg crosses ``path``.
+    """Return where a person's walk first crosses ``path``.
 
     ``(s, walk, sine, cosine)``: the path's arc length at the crossing (m), the distance
-    along the leg from the first waypoint to it (m), and the sine and cosine of the angle
-    from the path's heading to the leg's (positive sine: the person walks to the path's
-    left). Raises ``ValueError`` when the first leg does not cross the path.
+    walked from the first waypoint to it along the route (m), and the sine and cosine of
+    the angle from the path's heading to the crossing leg's (positive sine: the person
+    walks to the path's left). Raises ``ValueError`` when no leg crosses the path.
     """
     count = max(2, math.ceil(path.length / CROSSING_STEP) + 1)
     poses = path.pose(np.linspace(0.0, path.length, count))
     line = shapely.LineString(poses[:, :2])
-    start, end = np.asarray(waypoints[0], dtype=float), np.asarray(waypoints[1], dtype=float)
-    crossing = shapely.intersection(line, shapely.LineString([start, end]))
-    if crossing.is_empty:
-        raise ValueError(f"the first leg {tuple(start)} -> {tuple(end)} does not cross the path")
-    point = np.asarray(shapely.get_coordinates(crossing)[0])
-    s = float(line.project(shapely.Point(point)))
-    heading = float(path.pose(s)[2])
-    leg = end - start
-    direction = leg / np.linalg.norm(leg)
-    sine = math.cos(heading) * direction[1] - math.sin(heading) * direction[0]
-    cosine = math.cos(heading) * direction[0] + math.sin(heading) * direction[1]
-    return (round(s, 6), round(float(np.linalg.norm(point - start)), 6),
-            round(float(sine), 6), round(float(cosine), 6) + 0.0)
+    route = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+    walked = 0.0
+    for start, end in itertools.pairwise(route):
+        crossing = shapely.intersection(line, shapely.LineString([start, end]))
+        leg = end - start
+        length = float(np.linalg.norm(leg))
+        if crossing.is_empty or length == 0.0:
+            walked += length
+            continue
+        point = np.asarray(shapely.get_coordinates(crossing)[0])
+        s = float(line.project(shapely.Point(point)))
+        heading = float(path.pose(s)[2])
+        direction = leg / length
+        sine = math.cos(heading) * direction[1] - math.sin(heading) * direction[0]
+        cosine = math.cos(heading) * direction[0] + math.sin(heading) * direction[1]
+        return (round(s, 6), round(walked + float(np.linalg.norm(point - start)), 6),
+                round(float(sine), 6), round(float(cosine), 6) + 0.0)
+    raise ValueError(f"the walk {route.tolist()} never crosses the path")
 
 
 @dataclass(frozen=True)
@@ -74,8 +81,8 @@ class Crossing:
     """A triggered person's geometry against one vehicle's path.
 
     ``s`` is the arc length of the crossing on the vehicle's path, ``walk`` the distance
-    from the first waypoint to it along the leg, ``sine`` and ``cosine`` the leg's angle
-    to the path.
+    from the first waypoint to it along the route, ``sine`` and ``cosine`` the crossing
+    leg's angle to the path.
     """
 
     person: PersonSpec
