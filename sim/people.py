@@ -2,10 +2,11 @@
 
 A person is a static cylinder built by ``sim.world_builder.SimWorld`` and teleported
 (``resetBasePositionAndOrientation``) to where its route puts it at time ``t``. The route
-is the polyline ``PersonSpec.waypoints`` walked at ``speed`` from ``start_time``; a
-``loop`` person walks back to the first waypoint and starts again, any other person stays
-at the last waypoint. Before ``start_time`` a person is not in the scene: it is parked
-below the floor, out of every scan plane and out of the robot's reach.
+is the polyline ``PersonSpec.waypoints`` walked at ``speed`` from ``start_time``, standing
+``dwell`` seconds at a waypoint where asked; a ``loop`` person walks back to the first
+waypoint and starts again, any other person stays at the last waypoint. Before
+``start_time`` a person is not in the scene: it is parked below the floor, out of every
+scan plane and out of the robot's reach.
 
 A ``per_lap`` person's clock restarts with every lap (``update(t, lap_start=...)``), so it
 crosses the path at the same point of every lap; other people follow the run's clock. A
@@ -25,6 +26,7 @@ True
 from __future__ import annotations
 
 import bisect
+import math
 import time
 from collections.abc import Mapping
 
@@ -32,17 +34,10 @@ import numpy as np
 
 from worlds.spec import PersonSpec
 
-__all__ = ["PARKED_Z", "People", "person_position"]
+__all__ = ["PARKED_Z", "People", "Walk", "person_position"]
 
 PARKED_Z = -50.0
 """Height (m) of the body frame of a person who is not in the scene (below the floor)."""
-
-
-def _route(person: PersonSpec) -> np.ndarray:
-    points = np.asarray(person.waypoints, dtype=float).reshape(-1, 2)
-    if person.loop and len(points) > 1:
-        points = np.vstack([points, points[:1]])
-    return points
 
 
 def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
@@ -56,41 +51,42 @@ def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
     >>> bob = PersonSpec("bob", ((0.0, 0.0), (1.0, 0.0)), speed=0.5, loop=True)
     >>> [person_position(bob, t).tolist() for t in (1.0, 3.0, 4.5)]
     [[0.5, 0.0], [0.5, 0.0], [0.25, 0.0]]
+    >>> eve = PersonSpec("eve", ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0)), dwell=(0.0, 2.0, 0.0))
+    >>> [person_position(eve, t).tolist() for t in (0.5, 2.5, 3.5)]   # stands 2 s at the corner
+    [[0.5, 0.0], [1.0, 0.0], [1.0, 0.5]]
     """
-    if t < person.start_time:
-        return None
-    route = _route(person)
-    steps = np.hypot(*np.diff(route, axis=0).T)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
-    total = arc[-1]
-    if total <= 0.0:
-        return route[0].copy()
-    walked = person.speed * (t - person.start_time)
-    walked = walked % total if person.loop else min(walked, total)
-    # the segment that contains `walked`; searchsorted keeps zero-length legs harmless
-    leg = int(np.clip(np.searchsorted(arc, walked, side="right") - 1, 0, len(steps) - 1))
-    fraction = 0.0 if steps[leg] == 0.0 else (walked - arc[leg]) / steps[leg]
-    return route[leg] + fraction * (route[leg + 1] - route[leg])
+    xy = Walk(person).position(t)
+    return None if xy is None else np.array(xy)
 
 
-class _Walk:
-    """One person's route precomputed as floats: ``person_position`` without numpy per call.
+class Walk:
+    """One person's route as keyframes: where it is at each time of its clock.
 
-    ``People.update`` runs at every physics step; rebuilding the route's arc lengths with
-    numpy each time cost more than the engine's teleport. The arithmetic is that of
-    ``person_position`` (arc lengths from the same numpy calls, then the same float
-    operations), so both give the same positions to the last bit.
+    The route's waypoints (back to the first for a ``loop`` person) are reached at the
+    times walking at ``speed`` gives, and held for their ``dwell``; in between the person
+    moves in a straight line. Floats, not numpy: ``People.update`` asks at every physics
+    step.
     """
 
     def __init__(self, person: PersonSpec) -> None:
-        route = _route(person)
-        steps = np.hypot(*np.diff(route, axis=0).T)
-        arc = np.concatenate([[0.0], np.cumsum(steps)])
         self.person = person
-        self.route = route.tolist()
-        self.steps = steps.tolist()
-        self.arc = arc.tolist()
-        self.total = float(arc[-1])
+        points = [tuple(map(float, point)) for point in person.waypoints]
+        dwell = list(person.dwell) or [0.0] * len(points)
+        if person.loop and len(points) > 1:
+            points.append(points[0])
+            dwell.append(0.0)
+        times, keyframes, clock = [], [], 0.0
+        for index, point in enumerate(points):
+            if index:
+                (x0, y0), (x1, y1) = points[index - 1], point
+                clock += math.hypot(x1 - x0, y1 - y0) / person.speed
+            times.append(clock)
+            keyframes.append(point)
+            if dwell[index] > 0.0:
+                clock += dwell[index]
+                times.append(clock)
+                keyframes.append(point)
+        self.times, self.keyframes, self.total = times, keyframes, clock
 
     def position(self, t: float) -> tuple[float, float] | None:
         """Return ``(x, y)`` at ``t`` on this person's clock, ``None`` before the start."""
@@ -98,14 +94,13 @@ class _Walk:
         if t < person.start_time:
             return None
         if self.total <= 0.0:
-            x, y = self.route[0]
-            return x, y
-        walked = person.speed * (t - person.start_time)
-        walked = walked % self.total if person.loop else min(walked, self.total)
-        leg = min(max(bisect.bisect_right(self.arc, walked) - 1, 0), len(self.steps) - 1)
-        step = self.steps[leg]
-        fraction = 0.0 if step == 0.0 else (walked - self.arc[leg]) / step
-        (x0, y0), (x1, y1) = self.route[leg], self.route[leg + 1]
+            return self.keyframes[0]
+        clock = t - person.start_time
+        clock = clock % self.total if person.loop else min(clock, self.total)
+        k = min(max(bisect.bisect_right(self.times, clock) - 1, 0), len(self.times) - 2)
+        t0, t1 = self.times[k], self.times[k + 1]
+        fraction = 0.0 if t1 == t0 else (clock - t0) / (t1 - t0)
+        (x0, y0), (x1, y1) = self.keyframes[k], self.keyframes[k + 1]
         return x0 + fraction * (x1 - x0), y0 + fraction * (y1 - y0)
 
 
@@ -142,7 +137,7 @@ class People:
         self._sim = world.sim
         self._bullet = world.sim.bullet
         # The people built into the world are fixed when it is built.
-        self._walks = [_Walk(person) for person in world.people]
+        self._walks = [Walk(person) for person in world.people]
         self._ids = {walk.person.name: world.person_id(walk.person.name) for walk in self._walks}
         self._upright = self._bullet.getQuaternionFromEuler([0.0, 0.0, 0.0])
         # Where each body was last put (None: not yet, so the first update places all).

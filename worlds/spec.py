@@ -287,6 +287,8 @@ class PersonSpec:
         Emergence distance (m) of the ``distance`` trigger.
     meet_at
         Where across the vehicle's front the ``meet`` trigger aims (0 right, 1 left).
+    dwell
+        Seconds the person stands at each waypoint (empty: walks on; else one per waypoint).
 
     Examples
     --------
@@ -309,6 +311,7 @@ class PersonSpec:
     trigger_vehicle: str = ""
     trigger_distance: float = field(default=2.0, metadata=bounds(ge=0.0, le=100.0))
     meet_at: float = field(default=0.5, metadata=UNIT_INTERVAL)
+    dwell: tuple[float, ...] = field(default=(), metadata=START_TIME)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -317,6 +320,9 @@ class PersonSpec:
         if self.trigger not in TRIGGERS:
             raise SpecError(MEMORY, "trigger", f"must be one of {', '.join(TRIGGERS)}, got "
                             f"{self.trigger!r}{did_you_mean(self.trigger, TRIGGERS)}")
+        if self.dwell and len(self.dwell) != len(self.waypoints):
+            raise SpecError(MEMORY, "dwell", f"needs one time per waypoint ({len(self.waypoints)}),"
+                            f" got {len(self.dwell)}")
         if self.trigger_vehicle and not SAFE_NAME.fullmatch(self.trigger_vehicle):
             raise SpecError(MEMORY, "trigger_vehicle",
                             f"must be a vehicle's name, got {self.trigger_vehicle!r}")

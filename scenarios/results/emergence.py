@@ -3,8 +3,9 @@
 A person stands beside a straight path, outside the protective field, and steps into the
 vehicle's lane when the vehicle's front is ``d`` metres (along the path) before the
 person's crossing point (``trigger = "distance"``, :mod:`scenarios.bench.triggers`); the
-person then stands in the lane, as Sick's sizing assumes a person who sees the danger
-does. The *safe emergence distance* is the least ``d`` after which no contact follows.
+person then stands in the lane for a few seconds, as Sick's sizing assumes a person who
+sees the danger does, and walks on. The *safe emergence distance* is the least ``d``
+after which no contact follows.
 
 Predicted: the person reaches the protective field ``t_enter = (y0 - r - W/2) / v_p``
 after stepping out, the scanner confirms within its response time, the vehicle brakes;
@@ -59,6 +60,9 @@ WALKING_SPEED = 1.0
 STANDING_CLEARANCE = 0.3
 """Metres between the waiting person's body and the protective field's side."""
 
+STANDING_TIME = 3.0
+"""Seconds the person stands in the lane before walking on to the far side."""
+
 
 @dataclass(frozen=True)
 class EmergenceTrial:
@@ -103,9 +107,10 @@ def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
     path = PathSpec(((0.0, 0.0), (PATH_LENGTH / 2, 0.0), (PATH_LENGTH, 0.0)), (segment,),
                     speed=speed)
     y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
-    person = PersonSpec("worker", ((CROSSING_X, -y0), (CROSSING_X, 0.0)),
+    # Out into the lane, stand there (as Sick's sizing assumes), then on to the far side.
+    person = PersonSpec("worker", ((CROSSING_X, -y0), (CROSSING_X, 0.0), (CROSSING_X, y0)),
                         radius=PERSON_RADIUS, speed=walking_speed, trigger="distance",
-                        trigger_distance=distance)
+                        trigger_distance=distance, dwell=(0.0, STANDING_TIME, 0.0))
     return WorldSpec(name="emergence", walls=walls, posts=posts, boxes=(), people=(person,),
                      path=path, description="scenarios.results.emergence")
 

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 
 from robots.lasers import S300
 from robots.presets import PIONEER3DX
+from semistatic.errors import SpecError
 from sim.client import SimClient
 from sim.contacts import ContactMonitor
 from sim.ground_truth import people_positions
 from sim.laser import RaycastLaser
-from sim.people import PARKED_Z, People, _Walk, person_position
+from sim.people import PARKED_Z, People, person_position
 from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from tests.sim.random_scenes import simple_path
@@ -118,16 +120,39 @@ ROUTES = {
 
 
 @pytest.mark.parametrize("name", sorted(ROUTES))
-def test_precomputed_walk_is_person_position_to_the_last_bit(name):
+def test_a_walk_is_its_route_walked_at_speed(name):
+    # Reference: GEOS interpolating along the route, walked distance = speed x time.
     person = ROUTES[name]
-    walk = _Walk(person)
+    route = list(person.waypoints)
+    if person.loop and len(route) > 1:
+        route.append(route[0])
+    line = shapely.LineString(route) if len(route) > 1 else None
     times = [*np.random.default_rng(1).uniform(-1.0, 40.0, 500).tolist(), 0.0, 0.7, 12.0]
     for t in times:
-        expected = person_position(person, t)
-        if expected is None:
-            assert walk.position(t) is None
+        got = person_position(person, t)
+        if t < person.start_time:
+            assert got is None
+            continue
+        if line is None or line.length == 0.0:
+            expected = np.asarray(route[0], dtype=float)
         else:
-            assert list(walk.position(t)) == expected.tolist()
+            walked = person.speed * (t - person.start_time)
+            walked = walked % line.length if person.loop else min(walked, line.length)
+            expected = np.asarray(line.interpolate(walked).coords[0])
+        np.testing.assert_allclose(got, expected, atol=1e-9)
+
+
+def test_a_person_stands_for_its_dwell_at_a_waypoint():
+    eve = PersonSpec("eve", ((0.0, 0.0), (2.0, 0.0), (2.0, 2.0)), speed=1.0,
+                     dwell=(0.5, 3.0, 0.0))
+    # By hand: 0.5 s at the start, 2 s walking east, 3 s standing, 2 s walking north.
+    assert person_position(eve, 0.4).tolist() == [0.0, 0.0]
+    assert person_position(eve, 1.5).tolist() == [1.0, 0.0]
+    assert person_position(eve, 4.0).tolist() == [2.0, 0.0]
+    assert person_position(eve, 6.5).tolist() == [2.0, 1.0]
+    assert person_position(eve, 60.0).tolist() == [2.0, 2.0]
+    with pytest.raises(SpecError, match="dwell: needs one time per waypoint"):
+        PersonSpec("eve", ((0.0, 0.0), (2.0, 0.0)), dwell=(1.0,))
 
 
 class CountingBullet:
