@@ -39,15 +39,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from robots.presets import UGVSpec
-from robots.stopping import Supplements, visible_distance
+from robots.stopping import StopModel, Supplements, visible_distance
 from scenarios.bench.testbench import Testbench
 from scenarios.spec.field_sizing import required_size, stop_model
 from scenarios.spec.scenario import SafetySettings, ScenarioSpec
 from semistatic.params import MapperParams
 from worlds.spec import PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
 
-__all__ = ["CROSSING_X", "EmergenceTrial", "emergence_corridor", "emergence_trial",
-           "predicted_safe_emergence", "safe_emergence_distance"]
+__all__ = ["CROSSING_X", "EmergenceTrial", "emergence_bound", "emergence_corridor",
+           "emergence_trial", "predicted_safe_emergence", "safe_emergence_distance"]
 
 CROSSING_X = 4.5
 """Where (m along the straight path) the person steps into the lane."""
@@ -115,6 +115,34 @@ def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
                      path=path, description="scenarios.results.emergence")
 
 
+def emergence_bound(robot: UGVSpec, model: StopModel, speed: float, t_enter: float,
+                    person_radius: float) -> float:
+    """Return the least safe emergence distance (m) for a person who needs ``t_enter`` s.
+
+    ``speed`` (m/s) is the vehicle's when the person sets off, ``t_enter`` the time the
+    person then takes to reach the protective field: ``v (t_enter + T) + B(v) + max(r, c)``
+    (see the module docstring).
+
+    Examples
+    --------
+    >>> from robots.presets import PIONEER3DX
+    >>> from robots.stopping import StopModel
+    >>> model = StopModel(scanner_response_s=0.04, command_latency_s=0.0,
+    ...                   control_period_s=0.0, deceleration=1.0)
+    >>> # Standing still, only the LMS100's 0.5 m blind zone counts: it sees a 0.25 m body
+    >>> # from 0.61 m; its mount is 0.12 m ahead of the axle, the front 0.1825 m.
+    >>> round(emergence_bound(PIONEER3DX, model, 0.0, 1.0, 0.25), 3)
+    0.548
+    """
+    front = float(np.asarray(robot.footprint, dtype=float)[:, 0].max())
+    mount, laser = robot.safety_laser, robot.safety_laser.laser
+    # Standing, the vehicle must still see the person, or it drives on.
+    seen = mount.x + visible_distance(laser.range_min, laser.angular_resolution,
+                                      person_radius, SafetySettings().min_points) - front
+    return speed * (t_enter + model.reaction_time) + model.braking_distance(speed) \
+        + max(person_radius, seen)
+
+
 def predicted_safe_emergence(robot: UGVSpec, speed: float,
                              walking_speed: float = WALKING_SPEED) -> float:
     """Return the predicted safe emergence distance (m) of the corridor's trial."""
@@ -123,13 +151,7 @@ def predicted_safe_emergence(robot: UGVSpec, speed: float,
     _, width = required_size(model, _supplements(robot), robot, speed)
     y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
     t_enter = max(0.0, y0 - PERSON_RADIUS - width / 2) / walking_speed
-    front = float(np.asarray(robot.footprint, dtype=float)[:, 0].max())
-    mount, laser = robot.safety_laser, robot.safety_laser.laser
-    # Standing, the vehicle must still see the person, or it drives on.
-    seen = mount.x + visible_distance(laser.range_min, laser.angular_resolution,
-                                      PERSON_RADIUS, SafetySettings().min_points) - front
-    return speed * (t_enter + model.reaction_time) + model.braking_distance(speed) \
-        + max(PERSON_RADIUS, seen)
+    return emergence_bound(robot, model, speed, t_enter, PERSON_RADIUS)
 
 
 def emergence_trial(robot: UGVSpec, speed: float, distance: float, *, seed: int = 0,
