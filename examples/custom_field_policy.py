@@ -5,8 +5,8 @@ system". A policy decides, at every safety scan, which laser readings count agai
 the warning and the protective field (:mod:`scenarios.bench.policies`). This one, *short
 warning*, keeps the protective field whole and lets the warning field count only the
 readings closer than ``reach`` metres ahead: a shorter braking zone, at the price of
-less warning. Whatever a policy answers, readings in the vehicle's stop envelope
-always count: the robot still stops for a person.
+less warning. Whatever a policy answers, readings in the vehicle's minimum protective
+field always count: the robot still stops for a person.
 
 Run it::
 

@@ -4,7 +4,7 @@ The paper's proposal: once a semi-static object is in the local map of a path se
 "reduce one or both the safety areas ... so that no obstacle lies inside" them, so the
 next vehicle is not slowed or stopped by an object that is already known. We shrink a
 field by cutting out a ``margin``-wide band around every known object polyline; the
-vehicle's stop envelope stays whole whatever the policy (:mod:`scenarios.bench.policies`), so
+vehicle's minimum protective field stays whole whatever the policy (docs/safety/index.md), so
 anything that enters it (a person stepping out from behind a known box) still stops it.
 
 For occupancy, cutting a band out of the polygon is the same as not counting the

@@ -30,6 +30,7 @@ from typing import Any
 from robots.presets import PRESETS
 from scenarios.spec.scenario import (
     BOX_ACTIONS,
+    MINIMUM_FIELDS,
     POLICIES,
     BoxMove,
     Noise,
@@ -40,7 +41,16 @@ from scenarios.spec.scenario import (
 )
 from semistatic.params import MapperParams
 from semistatic.validation import SAFE_NAME
-from worlds.spec import BoxSpec, PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
+from worlds.spec import (
+    TRIGGERS,
+    BoxSpec,
+    PathSpec,
+    PersonSpec,
+    PostSpec,
+    SegmentSpec,
+    WallSpec,
+    WorldSpec,
+)
 
 __all__ = ["SECTIONS", "field_rows", "render"]
 
@@ -69,6 +79,8 @@ CHOICES = {
     (ScenarioSpec, "policy"): POLICIES,
     (ScenarioSpec, "robot"): tuple(sorted(PRESETS)),
     (BoxMove, "action"): BOX_ACTIONS,
+    (SafetySettings, "minimum_field"): MINIMUM_FIELDS,
+    (PersonSpec, "trigger"): TRIGGERS,
     (VehicleSpec, "robot"): tuple(sorted(PRESETS)),
 }
 """Fields whose value is one of a few words (the rest come from ``Literal`` types)."""

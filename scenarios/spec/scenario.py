@@ -274,8 +274,8 @@ class ScenarioSpec:
     seed
         Seed of every random stream (noise, people).
     policy
-        Safety-field policy: ``conservative`` or ``adaptive`` (in code, also a
-        ``scenarios.bench.policies.FieldPolicy`` object).
+        Safety-field policy: ``conservative``, ``adaptive`` (the paper's) or ``guarded``
+        (docs/safety/index.md; in code, also a ``scenarios.bench.policies.FieldPolicy`` object).
     description
         Free text.
     people
