@@ -32,6 +32,7 @@ from scenarios.process.errors import (
 from scenarios.process.progress import count_progress, sim_progress
 from scenarios.process.staging import check_output_dir, stage_and_publish
 from scenarios.spec.load import scenario_help
+from scenarios.spec.scenario import POLICIES
 from semistatic.errors import SpecError
 
 __all__ = ["BAG_STORAGE_CHOICES", "add_parsers", "main_check", "main_run", "main_table"]
@@ -66,7 +67,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     )
     run.add_argument(
         "--compare", action="store_true",
-        help="also run the other field policy on the same seed and compare lap times",
+        help="also run the other bundled field policies (conservative, adaptive, guarded) on "
+             "the same seed and compare lap times and safety figures",
     )
     run.add_argument(
         "--compare-sharing", action="store_true",
@@ -97,7 +99,8 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     table.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     table.add_argument(
         "--compare", action="store_true",
-        help="also run each scenario with adaptive fields and compare lap times",
+        help="also run each scenario with the other bundled field policies (adaptive, "
+             "guarded) and compare lap times and safety figures",
     )
 
 
@@ -127,6 +130,18 @@ def _estimated_sim_time(spec, world) -> float:
     from worlds.checks import build_spline
 
     return spec.laps * build_spline(world.path).length / world.path.speed
+
+
+def _other_policies(spec) -> list[str]:
+    """Return the bundled field policies other than the scenario's, in their order.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> _other_policies(SimpleNamespace(policy="adaptive"))
+    ['conservative', 'guarded']
+    """
+    return [policy for policy in POLICIES if policy != spec.policy]
 
 
 def main_check(args: argparse.Namespace) -> int:
@@ -189,11 +204,11 @@ def main_run(args: argparse.Namespace) -> int:
                            observers=(scan_recorder,) if scan_recorder else ())
     comparison = None
     if args.compare:
-        other = "adaptive" if spec.policy == "conservative" else "conservative"
-        other_spec = dataclasses.replace(spec, policy=other)
-        with sim_progress(total, f"{spec.name} ({other})", spec.laps) as bar:
-            other_log = run_scenario(other_spec, progress=bar)
-        comparison = summarize(other_log)
+        comparison = {}
+        for other in _other_policies(spec):
+            with sim_progress(total, f"{spec.name} ({other})", spec.laps) as bar:
+                other_log = run_scenario(dataclasses.replace(spec, policy=other), progress=bar)
+            comparison[other] = summarize(other_log)
     sharing_off = None
     if args.compare_sharing:
         if not spec.sharing:
@@ -272,12 +287,13 @@ def _run_summary(metrics: dict, out: Path) -> str:
             f"  {name}: sharing saves "
             f"{', '.join(f'{p:+.1f}%' for p in change['saved_percent'])} per lap"
         )
-    if "policy_comparison" in metrics:
-        saved = metrics["policy_comparison"]
-        lines.append(
-            f"  adaptive fields save {saved['total_time_saved_s']:.1f} s "
-            f"({saved['total_time_saved_percent']:.1f}%) against conservative"
-        )
+    for policy, compared in metrics.get("policy_comparison", {}).items():
+        if policy in POLICIES and policy != "conservative":
+            infractions = sum(compared["infractions"].values())
+            lines.append(
+                f"  {policy} fields save {compared['saved_percent']:.1f}% of the time against "
+                f"conservative, {compared['stops']} stops, {infractions} infractions"
+            )
     lines.append(
         f"  performance: real-time x{perf['real_time_factor']}, wall/engine "
         f"{perf['wall_over_engine']}, mapper {perf['mapper_ms_median']} ms/scan, "
@@ -296,8 +312,8 @@ def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dic
     spec, _ = _load(name, [], laps)
     comparison = None
     if compare:
-        other = "adaptive" if spec.policy == "conservative" else "conservative"
-        comparison = summarize(run_scenario(dataclasses.replace(spec, policy=other)))
+        comparison = {other: summarize(run_scenario(dataclasses.replace(spec, policy=other)))
+                      for other in _other_policies(spec)}
     metrics = write_outputs(run_scenario(spec), staging / name, figures=figures,
                             comparison=comparison)
     return name, metrics

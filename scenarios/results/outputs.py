@@ -38,6 +38,7 @@ from scenarios.results.figures import (
 )
 from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
 from scenarios.spec.field_sizing import field_checks
+from scenarios.spec.scenario import POLICIES
 
 __all__ = [
     "PAPER_TABLE1",
@@ -204,20 +205,44 @@ def failed_laps(log: RunLog) -> list[dict[str, Any]]:
     return failed
 
 
-def policy_comparison(conservative: Mapping[str, Any], adaptive: Mapping[str, Any]) -> dict:
-    """Return lap times, stops and the time saved by the adaptive policy (two summaries)."""
-    base = conservative["safety"]["total_time_s"]
-    new = adaptive["safety"]["total_time_s"]
-    return {
-        policy: {
-            key: summary["safety"][key]
-            for key in ("lap_time_s", "stops", "slowdowns", "stops_per_lap")
+COMPARED_KEYS = ("lap_time_s", "stops", "slowdowns", "stops_per_lap", "min_separation_m",
+                 "min_ttc_s")
+"""The ``safety`` keys ``policy_comparison`` keeps of every policy."""
+
+
+def policy_comparison(summaries: Mapping[str, Mapping[str, Any]]) -> dict:
+    """Return every policy's lap times and safety figures and what each saves.
+
+    ``summaries`` maps each field policy run on the same scenario and seed (at least
+    ``conservative``) to its summary. Per policy: :data:`COMPARED_KEYS`, the count of each
+    kind of infraction and ``saved_percent``, the total time it saves against the
+    conservative policy; ``total_time_saved_s`` / ``_percent`` are the adaptive policy's.
+
+    Examples
+    --------
+    >>> def run(laps, stops=0):
+    ...     return {"safety": {"lap_time_s": laps, "total_time_s": sum(laps), "stops": stops,
+    ...                        "slowdowns": 0, "stops_per_lap": [stops], "infractions": [],
+    ...                        "min_separation_m": {"person": 0.5}, "min_ttc_s": None}}
+    >>> both = policy_comparison({"conservative": run([40.0]), "adaptive": run([30.0])})
+    >>> both["adaptive"]["saved_percent"], both["total_time_saved_s"]
+    (25.0, 10.0)
+    """
+    base = summaries["conservative"]["safety"]["total_time_s"]
+    compared: dict[str, Any] = {}
+    for policy, summary in summaries.items():
+        safety = summary["safety"]
+        kinds = [item["kind"] for item in safety["infractions"]]
+        total = safety["total_time_s"]
+        compared[policy] = {key: safety[key] for key in COMPARED_KEYS} | {
+            "infractions": {kind: kinds.count(kind) for kind in sorted(set(kinds))},
+            "saved_percent": round(100.0 * (base - total) / base, 3) if base else None,
         }
-        for policy, summary in (("conservative", conservative), ("adaptive", adaptive))
-    } | {
-        "total_time_saved_s": round(base - new, 4),
-        "total_time_saved_percent": round(100.0 * (base - new) / base, 3) if base else None,
-    }
+    if "adaptive" in summaries:
+        new = summaries["adaptive"]["safety"]["total_time_s"]
+        compared["total_time_saved_s"] = round(base - new, 4)
+        compared["total_time_saved_percent"] = compared["adaptive"]["saved_percent"]
+    return compared
 
 
 def sharing_comparison(on: Mapping[str, Any], off: Mapping[str, Any]) -> dict:
@@ -347,13 +372,14 @@ def write_outputs(
     out_dir: str | os.PathLike[str],
     *,
     figures: bool = True,
-    comparison: Mapping[str, Any] | None = None,
+    comparison: Mapping[str, Mapping[str, Any]] | None = None,
     sharing_off: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Write the run's output directory and return the metrics written.
 
-    ``comparison`` is the other policy's summary on the same scenario and seed; it adds
-    ``policy_comparison`` to the metrics and ``figures/lap_times.png``. ``sharing_off``
+    ``comparison`` maps the other field policies run on the same scenario and seed to
+    their summaries; it adds ``policy_comparison`` to the metrics and
+    ``figures/lap_times.png``. ``sharing_off``
     is the summary of the same fleet run with sharing off; it adds
     ``sharing_comparison`` and ``figures/lap_times_sharing.png``.
     """
@@ -361,10 +387,9 @@ def write_outputs(
     if sharing_off is not None:
         metrics["sharing_comparison"] = sharing_comparison(metrics, sharing_off)
     if comparison is not None:
-        other = comparison
-        conservative = policy_name(log.spec.policy) == "conservative"
-        pair = (metrics, other) if conservative else (other, metrics)
-        metrics["policy_comparison"] = policy_comparison(*pair)
+        runs = {policy_name(log.spec.policy): metrics, **comparison}
+        metrics["policy_comparison"] = policy_comparison(
+            {policy: runs[policy] for policy in POLICIES if policy in runs})
 
     def fill(staging: Path) -> None:
         (staging / "metrics.json").write_text(json_text(metrics))
@@ -378,10 +403,11 @@ def write_outputs(
             _figures(log, staging)
             if comparison is not None:
                 times = metrics["policy_comparison"]
+                policies = [p for p in POLICIES if p in times]
                 plot_lap_times(
-                    {p: times[p]["lap_time_s"] for p in ("conservative", "adaptive")},
+                    {p: times[p]["lap_time_s"] for p in policies},
                     staging / "figures" / "lap_times.png",
-                    stops={p: times[p]["stops_per_lap"] for p in ("conservative", "adaptive")},
+                    stops={p: times[p]["stops_per_lap"] for p in policies},
                     title=f"{log.spec.name}: lap times by field policy (same seed)",
                 )
             if sharing_off is not None:

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.results.outputs import PAPER_TABLE1, TABLE1_COLUMNS
+from scenarios.spec.scenario import POLICIES
 
 __all__ = ["comparison_rows", "render_table", "table_rows", "write_table"]
 
@@ -47,8 +48,9 @@ def _cell(value: Any) -> str:
     return f"{value:.2f}" if isinstance(value, float) else str(value)
 
 
-COMPARISON_HEADER = ("scenario", "conservative s", "adaptive s", "saved %", "stops cons.",
-                     "stops adapt.")
+COMPARISON_HEADER = ("scenario", "policy", "total s", "saved %", "stops", "slowdowns",
+                     "person m", "box m", "TTC s", "infractions")
+"""The policy comparison's columns: lap times and the safety figures of each policy."""
 
 
 def _aligned(header: tuple[str, ...], rows: list[tuple[Any, ...]], text_columns: int) -> list[str]:
@@ -68,25 +70,37 @@ def render_table(results: Mapping[str, Mapping[str, Any]]) -> str:
     lines = _aligned(HEADER, table_rows(results), text_columns=2)
     comparison = comparison_rows(results)
     if comparison:
-        lines += ["", *_aligned(COMPARISON_HEADER, comparison, text_columns=1)]
+        lines += ["", *_aligned(COMPARISON_HEADER, comparison, text_columns=2)]
     return "\n".join(lines)
 
 
 def comparison_rows(results: Mapping[str, Mapping[str, Any]]) -> list[tuple[Any, ...]]:
-    """Return ``(scenario, conservative s, adaptive s, saved %, stops c, stops a)`` rows."""
+    """Return one row per scenario and field policy compared (:data:`COMPARISON_HEADER`).
+
+    The separations are the least from the vehicle's footprint to a person and to a box
+    over the run (m), TTC the least time to collision (s); the infractions are counted.
+
+    Examples
+    --------
+    >>> run = {"lap_time_s": [40.0, 30.0], "stops": 1, "slowdowns": 2, "saved_percent": 0.0,
+    ...        "min_separation_m": {"person": 0.61, "box": 0.5}, "min_ttc_s": 1.5,
+    ...        "infractions": {"near_miss": 1}}
+    >>> comparison_rows({"pal3b": {"policy_comparison": {"conservative": run}}})
+    [('pal3b', 'conservative', 70.0, 0.0, 1, 2, 0.61, 0.5, 1.5, 1)]
+    """
     rows = []
     for name, metrics in results.items():
-        pair = metrics.get("policy_comparison")
-        if pair is None:
-            continue
-        rows.append((
-            name,
-            round(sum(pair["conservative"]["lap_time_s"]), 1),
-            round(sum(pair["adaptive"]["lap_time_s"]), 1),
-            pair["total_time_saved_percent"],
-            pair["conservative"]["stops"],
-            pair["adaptive"]["stops"],
-        ))
+        compared = metrics.get("policy_comparison", {})
+        for policy in POLICIES:
+            if policy not in compared:
+                continue
+            run = compared[policy]
+            rows.append((
+                name, policy, round(sum(run["lap_time_s"]), 1), run["saved_percent"],
+                run["stops"], run["slowdowns"], run["min_separation_m"]["person"],
+                run["min_separation_m"]["box"], run["min_ttc_s"],
+                sum(run["infractions"].values()),
+            ))
     return rows
 
 
@@ -101,9 +115,10 @@ def _markdown(results: Mapping[str, Mapping[str, Any]]) -> str:
     if comparison:
         lines += [
             "",
-            "| scenario | conservative total (s) | adaptive total (s) | saved (%) "
-            "| stops conservative | stops adaptive |",
-            "|---|---:|---:|---:|---:|---:|",
+            "| scenario | policy | total (s) | saved (%) | stops | slowdowns "
+            "| least separation, person (m) | least separation, box (m) | least TTC (s) "
+            "| infractions |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         lines += ["| " + " | ".join(_cell(v) for v in row) + " |" for row in comparison]
     return "\n".join(lines) + "\n"

@@ -274,6 +274,26 @@ def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b(policy):
     assert safety["collisions"] == 0
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("minimum_field", ["fixed", "standard"])
+def test_the_old_fixed_minimum_field_lets_the_lgv_reach_the_worker_at_1_m_s(minimum_field):
+    # The warehouse LGV drives the south aisle at 1.0 m/s, where it stops within 0.65 m
+    # (robots.stopping); a policy that counts nothing leaves only the minimum field. The
+    # old fixed one (the first 0.15 m of the protective field) sees the worker too late,
+    # and the testbench reports the contact; the standard one stops in time.
+    spec = load_scenario("warehouse", overrides=[
+        "laps=1", "seed=0", f"safety.minimum_field={minimum_field}"])
+    with Testbench(spec, policy=NothingCounts()) as bench:
+        record = bench.run().safety_record
+    contacts = [item for item in record.infractions if item["kind"] == "contact"]
+    if minimum_field == "fixed":
+        assert contacts, "the contact with the worker went unreported"
+        assert "worker" in contacts[0]["detail"]
+    else:
+        assert contacts == []
+        assert record.min_separation["person"] > 0.0
+
+
 class WrongAnswer(FieldPolicy):
     def __init__(self, answer):
         self.answer = answer
