@@ -79,6 +79,12 @@ def explained_readings(
 
     ``points`` and ``known_objects`` must be in the same frame. NaN points (no return)
     are never explained.
+
+    Examples
+    --------
+    >>> explained_readings([[1.02, 0.5], [0.7, 0.0], [np.nan, np.nan]],
+    ...                    [[[1.0, -1.0], [1.0, 1.0]]], margin=0.05)
+    array([ True, False, False])
     """
     if not margin > 0:
         raise ValueError(f"explained_readings: margin must be > 0 m (got {margin})")
