@@ -1,7 +1,7 @@
 """Fitted polyline vertices: edges fitted along the beams between Douglas-Peucker corners.
 
 Douglas-Peucker decides *where* a polyline bends; its vertices are raw readings, i.e. the
-noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polyline` keeps the
+noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polylines` keeps the
 corners but moves the vertices onto the surface the readings describe:
 
 1. each edge (the readings between two consecutive corners, both included) is fitted
@@ -39,7 +39,7 @@ Examples
 --------
 >>> x = np.array([1.0, 1.01, 0.99, 1.01, 0.99])  # a noisy wall x = 1 seen at 5 readings
 >>> y = np.array([-0.2, -0.1, 0.0, 0.1, 0.2])
->>> vertices, corners = fit_polyline(np.column_stack((x, y)), [0, 2, 4], epsilon=0.03)
+>>> vertices, corners, _ = fit_polylines(np.column_stack((x, y)), [0] * 5, [0, 2, 4], 0.03)
 >>> vertices.round(3), corners  # one line fits: the middle corner goes
 (array([[ 1.004, -0.201],
        [ 0.996,  0.201]]), array([0, 4]))
@@ -51,10 +51,10 @@ import math
 
 import numba
 import numpy as np
+from numba.extending import overload
 from numpy.typing import ArrayLike
 
-__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "fit_polylines_compiled",
-           "is_mixed_pixel", "total_least_squares"]
+__all__ = ["MIXED_PIXEL_SINE", "fit_polylines", "is_mixed_pixel", "total_least_squares"]
 
 # Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
 # their intersection is ill-conditioned, so the corner reading's projections are used.
@@ -139,90 +139,91 @@ def is_mixed_pixel(points: ArrayLike, end: int, corner: int, far: int) -> bool:
                              np.empty(count)))
 
 
-def fit_polyline(
-    points: ArrayLike, corners: ArrayLike, epsilon: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Return fitted vertices of one polyline through ``points`` bending at ``corners``.
-
-    See the module docstring for the steps. ``points`` are in the sensor frame (the beams
-    start at the origin), in scan order.
-
-    Parameters
-    ----------
-    points
-        ``(N, 2)`` readings of one interval, ``N >= 2``.
-    corners
-        Increasing positions into ``points`` of the Douglas-Peucker vertices, the first
-        and last point included.
-    epsilon
-        Tolerance (m) within which one line must fit the readings of merged edges.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``(vertices, kept)``: ``(K, 2)`` fitted vertices and the ``(K,)`` positions into
-        ``points`` of the readings they belong to (a subset of ``corners``).
-
-    Examples
-    --------
-    >>> corner = [[1.0, -0.4], [1.0, -0.2], [1.0, 0.0], [0.8, 0.0], [0.6, 0.0]]
-    >>> vertices, kept = fit_polyline(corner, [0, 2, 4], epsilon=0.01)
-    >>> vertices.round(6) + 0.0, kept
-    (array([[ 1. , -0.4],
-           [ 1. ,  0. ],
-           [ 0.6,  0. ]]), array([0, 2, 4]))
-    """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
-    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
-    if points.shape[0] < 2 or corners.size < 2:
-        raise ValueError("fit_polyline: needs at least 2 points and 2 corners")
-    if corners[0] != 0 or corners[-1] != points.shape[0] - 1 or (np.diff(corners) <= 0).any():
-        raise ValueError(
-            "fit_polyline: corners must increase from 0 to the last point's position"
-        )
-    if not epsilon > 0.0:
-        raise ValueError(f"fit_polyline: epsilon must be > 0 m, got {epsilon!r}")
-    vertices, kept, _ = fit_polylines(points, np.zeros(points.shape[0], np.int64), corners,
-                                      float(epsilon))
-    return vertices, kept
-
-
 def fit_polylines(
-    points: np.ndarray, line_ids: np.ndarray, corners: np.ndarray, epsilon: float
+    points: ArrayLike, line_ids: ArrayLike, corners: ArrayLike, epsilon: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the fitted vertices of every polyline of a scan at once.
 
+    See the module docstring for the steps. ``points`` are in the sensor frame (the beams
+    start at the origin), in scan order. Compiled kernels call this function too (the
+    extraction does): it compiles to the same kernel, without the checks.
+
     Parameters
     ----------
     points
-        ``(P, 2)`` float64 readings of all intervals one after the other (sensor frame).
+        ``(P, 2)`` readings of all intervals one after the other.
     line_ids
-        ``(P,)`` int64, non-decreasing interval number of each reading (each interval
-        has at least two readings).
+        ``(P,)`` non-decreasing interval number of each reading (each interval has at
+        least two readings).
     corners
-        Increasing int64 positions into ``points`` of the Douglas-Peucker vertices, every
+        Increasing positions into ``points`` of the Douglas-Peucker vertices, every
         interval's first and last reading included.
     epsilon
-        Merge tolerance (m), ``> 0``.
+        Tolerance (m) within which one line must fit the readings of merged edges, ``> 0``.
 
     Returns
     -------
     tuple of numpy.ndarray
         ``(vertices, kept, vertex_lines)``: ``(K, 2)`` fitted vertices, the ``(K,)``
-        positions into ``points`` of their readings and the ``(K,)`` interval of each.
+        positions into ``points`` of the readings they belong to (a subset of
+        ``corners``) and the ``(K,)`` interval of each.
 
     Examples
     --------
+    >>> corner = [[1.0, -0.4], [1.0, -0.2], [1.0, 0.0], [0.8, 0.0], [0.6, 0.0]]
+    >>> vertices, kept, _ = fit_polylines(corner, [0] * 5, [0, 2, 4], epsilon=0.01)
+    >>> vertices.round(6) + 0.0, kept
+    (array([[ 1. , -0.4],
+           [ 1. ,  0. ],
+           [ 0.6,  0. ]]), array([0, 2, 4]))
     >>> points = np.array([[1.0, 0.0], [1.0, 0.1], [2.0, 0.0], [2.0, 0.2], [2.0, 0.4]])
-    >>> vertices, kept, lines = fit_polylines(points, np.array([0, 0, 1, 1, 1]),
-    ...                                       np.array([0, 1, 2, 4]), 0.01)
+    >>> vertices, kept, lines = fit_polylines(points, [0, 0, 1, 1, 1], [0, 1, 2, 4], 0.01)
     >>> kept, lines
     (array([0, 1, 2, 4]), array([0, 0, 1, 1]))
     """
-    return fit_polylines_compiled(
-        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
-        line_ids, corners, epsilon,
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    line_ids = np.asarray(line_ids, dtype=np.int64).reshape(-1)
+    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    count = points.shape[0]
+    if count < 2 or corners.size < 2:
+        raise ValueError("fit_polylines: needs at least 2 points and 2 corners")
+    if not np.isfinite(points).all():
+        raise ValueError("fit_polylines: points must be finite; drop invalid readings first")
+    starts = np.flatnonzero(np.diff(line_ids)) + 1
+    firsts, lasts = np.concatenate(([0], starts)), np.concatenate((starts, [count])) - 1
+    if line_ids.shape != (count,) or (np.diff(line_ids) < 0).any() or (lasts <= firsts).any():
+        raise ValueError(
+            "fit_polylines: line_ids must give each reading its interval, non-decreasing, "
+            "each interval at least 2 readings"
+        )
+    if (
+        corners[0] != 0 or corners[-1] != count - 1 or (np.diff(corners) <= 0).any()
+        or not (np.isin(firsts, corners).all() and np.isin(lasts, corners).all())
+    ):
+        raise ValueError(
+            "fit_polylines: corners must increase from 0 to the last point's position and "
+            "hold every interval's first and last reading"
+        )
+    if not epsilon > 0.0:
+        raise ValueError(f"fit_polylines: epsilon must be > 0 m, got {epsilon!r}")
+    return _fitted(
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), line_ids,
+        corners, float(epsilon),
     )
+
+
+@overload(fit_polylines, jit_options={"cache": True})
+def _fit_polylines_compiled(points, line_ids, corners, epsilon):  # pragma: no cover
+    """Return :func:`fit_polylines` for compiled callers: their arrays are valid already."""
+
+    def fit(points, line_ids, corners, epsilon):
+        # The fit reads the readings' coordinates as two contiguous arrays.
+        x, y = np.empty(points.shape[0]), np.empty(points.shape[0])
+        for k in range(points.shape[0]):
+            x[k], y[k] = points[k, 0], points[k, 1]
+        return _fitted(x, y, line_ids, corners, epsilon)
+
+    return fit
 
 
 @numba.njit(cache=True)
@@ -326,21 +327,8 @@ def _mixed_pixel(x, y, end, corner, low, high, weights):  # pragma: no cover - c
 
 
 @numba.njit(cache=True)
-def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
-    """Return :func:`fit_polylines` of readings given as two coordinate arrays.
-
-    For compiled callers: no checks; ``x`` and ``y`` are the readings' contiguous float64
-    coordinates, the other arguments and the result as :func:`fit_polylines`.
-
-    Examples
-    --------
-    >>> x, y = np.array([1.0, 1.0, 1.0]), np.array([-0.1, 0.0, 0.1])
-    >>> vertices, kept, lines = fit_polylines_compiled(x, y, np.zeros(3, np.int64),
-    ...                                                np.array([0, 1, 2]), 0.01)
-    >>> vertices.round(6) + 0.0, kept, lines
-    (array([[ 1. , -0.1],
-           [ 1. ,  0.1]]), array([0, 2]), array([0, 0]))
-    """
+def _fitted(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+    """Return :func:`fit_polylines` of readings given as two contiguous coordinate arrays."""
     count = corners.size
     # The readings' ranges, once: every fit along the beams weighs each reading by them.
     norms = np.empty(x.size)

@@ -105,8 +105,6 @@ class LocalMap:
         Name (or number) of the path segment, written to the GeoJSON properties.
     params
         Mapper thresholds; ``MapperParams()`` when omitted.
-    join_mode
-        Restriction used to decide joins (see :class:`~semistatic.mapper.PolylineMap`).
 
     Examples
     --------
@@ -123,7 +121,6 @@ class LocalMap:
         *,
         segment: str | int = 0,
         params: MapperParams | None = None,
-        join_mode: str = "projection",
     ) -> None:
         origin = np.array(origin, dtype=float).reshape(-1)
         if origin.shape != (3,) or not np.all(np.isfinite(origin)):
@@ -145,7 +142,6 @@ class LocalMap:
             params,
             keep=self._touches_safety_area,
             keep_box=None if self.safety_area is None else self._area_box,
-            join_mode=join_mode,
         )
 
     @property
