@@ -348,114 +348,18 @@ def _fitted(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
         stop = start
         while stop + 1 < count and line_ids[corners[stop + 1]] == line_ids[corners[start]]:
             stop += 1
-        # Merge step: drop a corner while one line fits its two edges within epsilon.
-        # The line of the last merge that dropped a corner spans merged[size - 1]..span:
-        # when the next corner stays, it is the edge's own line (no second fit).
-        size = 1
-        merged[0] = corners[start]
-        span = -1
-        for j in range(start + 1, stop):
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1], weights)
-            # Whether a reading lies farther than epsilon from that line (inline: a kernel
-            # of its own costs a compilation at first use); the first one decides.
-            apart = False
-            for k in range(merged[size - 1], corners[j + 1] + 1):
-                if abs((x[k] - mx) * dy - (y[k] - my) * dx) > epsilon:
-                    apart = True
-                    break
-            if apart:
-                fitted[size - 1] = span if span == corners[j] else -1
-                merged[size] = corners[j]
-                size += 1
-                span = -1
-            else:
-                span = corners[j + 1]
-                fits[size - 1, 0], fits[size - 1, 1] = mx, my
-                fits[size - 1, 2], fits[size - 1, 3] = dx, dy
-        fitted[size - 1] = span if span == corners[stop] else -1
-        merged[size] = corners[stop]
-        size += 1
-        # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
-        if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
-                x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2],
-                weights):
-            size -= 1
-        if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
-                x, y, merged[0], merged[1], merged[1], merged[2], weights):
-            for k in range(size - 1):
-                merged[k] = merged[k + 1]
-            for k in range(size - 2):
-                fitted[k] = fitted[k + 1]
-                for value in range(4):
-                    fits[k, value] = fits[k + 1, value]
-            size -= 1
-        for edge in range(size - 1):
-            if fitted[edge] == merged[edge + 1]:
-                continue
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1], weights)
-            fits[edge, 0] = mx
-            fits[edge, 1] = my
-            fits[edge, 2] = dx
-            fits[edge, 3] = dy
+        size = _merged_edges(x, y, norms, corners, start, stop, epsilon, merged, fits, fitted,
+                             weights)
         for vertex in range(size):
             reading = merged[vertex]
-            px = x[reading]
-            py = y[reading]
-            vx = px
-            vy = py
             if vertex == 0 or vertex == size - 1:
                 edge = 0 if vertex == 0 else size - 2
-                mx, my, dx, dy = fits[edge, 0], fits[edge, 1], fits[edge, 2], fits[edge, 3]
-                norm = math.hypot(px, py)
-                sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
-                if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
-                    vx, vy = _project(px, py, mx, my, dx, dy)
-                else:
-                    # The beam t * (px, py) / norm crosses the line m + s d where
-                    # t = cross(m, d) / cross(beam, d).
-                    t = (mx * dy - my * dx) / sine
-                    cx = t * px / norm
-                    cy = t * py / norm
-                    # A reading on the surface puts the crossing its range error times
-                    # cos(incidence) along the line from itself: at most about epsilon
-                    # (3 sigma). One off the line (on the next face round a corner, a
-                    # mixed pixel) moves it outward by its offset over tan(incidence),
-                    # past the corner: then the reading itself, on the same beam, marks
-                    # how far the readings reach. Outward: away from the edge's other
-                    # reading.
-                    other = merged[1] if vertex == 0 else merged[size - 2]
-                    outward = (px - x[other]) * dx + (py - y[other]) * dy
-                    beyond = (cx - px) * dx + (cy - py) * dy
-                    if beyond * outward <= epsilon * abs(outward):
-                        vx = cx
-                        vy = cy
-                    else:
-                        vx = px
-                        vy = py
+                other = merged[1] if vertex == 0 else merged[size - 2]
+                vx, vy = _end_vertex(x[reading], y[reading], x[other], y[other], fits[edge, 0],
+                                     fits[edge, 1], fits[edge, 2], fits[edge, 3], epsilon)
             else:
-                ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[
-                    vertex - 1, 2], fits[vertex - 1, 3]
-                bx, by, bdx, bdy = fits[vertex, 0], fits[vertex, 1], fits[vertex, 2], fits[
-                    vertex, 3]
-                sine = adx * bdy - ady * bdx
-                use_projection = abs(sine) < MIN_CORNER_SINE
-                if not use_projection:
-                    # a + s ad = b + u bd  ->  s = cross(b - a, bd) / cross(ad, bd)
-                    s = ((bx - ax) * bdy - (by - ay) * bdx) / sine
-                    vx = ax + s * adx
-                    vy = ay + s * ady
-                    before = merged[vertex - 1]
-                    after = merged[vertex + 1]
-                    chord = min(
-                        math.hypot(px - x[before], py - y[before]),
-                        math.hypot(x[after] - px, y[after] - py),
-                    )
-                    use_projection = math.hypot(vx - px, vy - py) > MAX_CORNER_SHIFT * chord
-                if use_projection:
-                    qx, qy = _project(px, py, ax, ay, adx, ady)
-                    rx, ry = _project(px, py, bx, by, bdx, bdy)
-                    vx = 0.5 * (qx + rx)
-                    vy = 0.5 * (qy + ry)
+                vx, vy = _inner_vertex(x, y, merged[vertex - 1], reading, merged[vertex + 1],
+                                       fits, vertex)
             out[written, 0] = vx
             out[written, 1] = vy
             kept[written] = reading
@@ -463,3 +367,124 @@ def _fitted(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
             written += 1
         start = stop + 1
     return out[:written].copy(), kept[:written].copy(), lines[:written].copy()
+
+
+@numba.njit(cache=True)
+def _merged_edges(
+    x, y, norms, corners, start, stop, epsilon, merged, fits, fitted, weights
+):  # pragma: no cover - compiled
+    """Write the corners that stay of one interval, ``corners[start..stop]``; return how many.
+
+    Steps 1 and 2 of the module docstring: ``merged`` gets the corners that stay,
+    ``fits[e]`` the line ``(mx, my, dx, dy)`` fitted along the beams to edge ``e``
+    (``fitted`` and ``weights`` are scratch).
+    """
+    # Merge step: drop a corner while one line fits its two edges within epsilon.
+    # The line of the last merge that dropped a corner spans merged[size - 1]..span:
+    # when the next corner stays, it is the edge's own line (no second fit).
+    size = 1
+    merged[0] = corners[start]
+    span = -1
+    for j in range(start + 1, stop):
+        mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1], weights)
+        # Whether a reading lies farther than epsilon from that line (inline: a kernel
+        # of its own costs a compilation at first use); the first one decides.
+        apart = False
+        for k in range(merged[size - 1], corners[j + 1] + 1):
+            if abs((x[k] - mx) * dy - (y[k] - my) * dx) > epsilon:
+                apart = True
+                break
+        if apart:
+            fitted[size - 1] = span if span == corners[j] else -1
+            merged[size] = corners[j]
+            size += 1
+            span = -1
+        else:
+            span = corners[j + 1]
+            fits[size - 1, 0], fits[size - 1, 1] = mx, my
+            fits[size - 1, 2], fits[size - 1, 3] = dx, dy
+    fitted[size - 1] = span if span == corners[stop] else -1
+    merged[size] = corners[stop]
+    size += 1
+    # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
+    if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
+            x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2],
+            weights):
+        size -= 1
+    if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
+            x, y, merged[0], merged[1], merged[1], merged[2], weights):
+        for k in range(size - 1):
+            merged[k] = merged[k + 1]
+        for k in range(size - 2):
+            fitted[k] = fitted[k + 1]
+            for value in range(4):
+                fits[k, value] = fits[k + 1, value]
+        size -= 1
+    for edge in range(size - 1):
+        if fitted[edge] == merged[edge + 1]:
+            continue
+        mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1], weights)
+        fits[edge, 0] = mx
+        fits[edge, 1] = my
+        fits[edge, 2] = dx
+        fits[edge, 3] = dy
+    return size
+
+
+@numba.njit(cache=True)
+def _end_vertex(px, py, ox, oy, mx, my, dx, dy, epsilon):  # pragma: no cover - compiled
+    """Return an end vertex: where the end reading's beam crosses its edge's line (step 4).
+
+    ``(px, py)`` is the end reading, ``(ox, oy)`` the edge's other reading and
+    ``(mx, my, dx, dy)`` the edge's fitted line.
+    """
+    norm = math.hypot(px, py)
+    sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
+    if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
+        return _project(px, py, mx, my, dx, dy)
+    # The beam t * (px, py) / norm crosses the line m + s d where
+    # t = cross(m, d) / cross(beam, d).
+    t = (mx * dy - my * dx) / sine
+    cx = t * px / norm
+    cy = t * py / norm
+    # A reading on the surface puts the crossing its range error times cos(incidence)
+    # along the line from itself: at most about epsilon (3 sigma). One off the line (on
+    # the next face round a corner, a mixed pixel) moves it outward by its offset over
+    # tan(incidence), past the corner: then the reading itself, on the same beam, marks
+    # how far the readings reach. Outward: away from the edge's other reading.
+    outward = (px - ox) * dx + (py - oy) * dy
+    beyond = (cx - px) * dx + (cy - py) * dy
+    if beyond * outward <= epsilon * abs(outward):
+        return cx, cy
+    return px, py
+
+
+@numba.njit(cache=True)
+def _inner_vertex(x, y, before, reading, after, fits, vertex):  # pragma: no cover - compiled
+    """Return inner vertex ``vertex`` at reading ``reading``: where its two lines meet (step 3).
+
+    ``before`` and ``after`` are the readings of the neighbouring vertices.
+    """
+    px, py = x[reading], y[reading]
+    vx, vy = px, py
+    ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[vertex - 1, 2], fits[
+        vertex - 1, 3]
+    bx, by, bdx, bdy = fits[vertex, 0], fits[vertex, 1], fits[vertex, 2], fits[vertex, 3]
+    sine = adx * bdy - ady * bdx
+    use_projection = abs(sine) < MIN_CORNER_SINE
+    if not use_projection:
+        # a + s ad = b + u bd  ->  s = cross(b - a, bd) / cross(ad, bd)
+        s = ((bx - ax) * bdy - (by - ay) * bdx) / sine
+        vx = ax + s * adx
+        vy = ay + s * ady
+        chord = min(
+            math.hypot(px - x[before], py - y[before]),
+            math.hypot(x[after] - px, y[after] - py),
+        )
+        use_projection = math.hypot(vx - px, vy - py) > MAX_CORNER_SHIFT * chord
+    if use_projection:
+        qx, qy = _project(px, py, ax, ay, adx, ady)
+        rx, ry = _project(px, py, bx, by, bdx, bdy)
+        vx = 0.5 * (qx + rx)
+        vy = 0.5 * (qy + ry)
+    return vx, vy
