@@ -224,7 +224,11 @@ def _distances(points0, bounds0, points1, bounds1, mode, limit):  # pragma: no c
     stops as soon as its best distance exceeds ``limit`` (a lower bound above ``limit``).
     The one entry point of the module's distances, and the search is written inline: a
     compiled caller re-optimises and re-emits the machine code of every kernel it calls,
-    so each extra layer over the search costs about as much as compiling it again.
+    so each extra layer over the search costs about as much as compiling it again. Hence
+    its ~140 lines. Measured (CPU seconds to compile this kernel from an empty cache, 2
+    shared cores under load, paired runs): split into a start, a branch-and-bound and a
+    halving kernel, mean 6.6 -> 10.4 s over 3 runs (+56%); the same helpers inlined into
+    it (``inline="always"``), median 6.6 -> 7.3 s over 6 runs (+16%).
 
     In ``"vertex"`` mode both polylines are first restricted to each other (eq. 3); the
     vertex-to-segment distances that choose the restriction are the same that start the
