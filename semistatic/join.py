@@ -204,7 +204,9 @@ def merge_group(
     by_weight = sorted(members, key=lambda k: (-weights[k], k))
     result, total = polylines[by_weight[0]], float(weights[by_weight[0]])
     for k in by_weight[1:]:
+        weight = total / max(weights[k], 1e-12)
         (result, _), = merge([result], [[polylines[k]]], epsilon,
-                             map_weights=[total / max(weights[k], 1e-12)])
+                             edge_weights=np.full(max(len(result) - 1, 0), weight),
+                             end_weights=[weight])
         total += float(weights[k])
     return result

@@ -633,13 +633,15 @@ class PolylineMap:
         by_map: dict[int, list[int]] = {}
         for pair in associated:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
+        if not by_map:
+            return set()
         epsilon = self.params.epsilon
         entries = [self._entries[map_id] for map_id in by_map]
         merged = merge(
             [entry.polyline for entry in entries],
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
-            map_weights=[entry.edge_weights for entry in entries],
+            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
             end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )

@@ -9,7 +9,7 @@ Merging is also an averaging step, so that repeated observations of an unchanged
 converge instead of drifting or growing:
 
 - a map polyline that summarises ``w`` observations moves toward the scan by
-  ``alpha = 1 / (1 + w)`` (``map_weights=[w]``): each map vertex that faces the scan moves
+  ``alpha = 1 / (1 + w)`` (edge and end weights ``w``): each map vertex that faces the scan moves
   ``alpha`` of the way to its nearest point on the scan polyline, and each inserted scan
   vertex lies ``alpha`` of the way from its projection on the map to where the scan saw it.
   Vertices inserted close to a map edge are collinear with it and removed by
@@ -30,7 +30,8 @@ Examples
 >>> line.points.round(3)
 array([[0.  , 0.  ],
        [3.  , 0.02]])
->>> (line, _), = merge([wall], [[[[0.0, 0.02], [2.0, 0.02]]]], epsilon=0.03, map_weights=[3.0])
+>>> (line, _), = merge([wall], [[[[0.0, 0.02], [2.0, 0.02]]]], 0.03, edge_weights=[3.0],
+...                    end_weights=[3.0])
 >>> line.points.round(3)
 array([[0.   , 0.005],
        [2.   , 0.005]])
@@ -274,7 +275,7 @@ def merge(
     observations: Sequence[Sequence[Polyline | ArrayLike]],
     epsilon: float,
     *,
-    map_weights: Sequence[float | ArrayLike] | None = None,
+    edge_weights: ArrayLike | None = None,
     end_weights: ArrayLike | None = None,
     end_tolerance: float | None = None,
 ) -> list[tuple[Polyline, np.ndarray]]:
@@ -285,10 +286,10 @@ def merge(
     They are merged into it in turn, all against the same map weights, since together
     they are one observation; every map polyline is merged in one compiled call.
 
-    The map is averaged edge by edge: ``map_weights[k]`` holds one weight per edge of
-    ``map_polylines[k]`` (or one number for all of them), how many observations saw that
-    edge so far; each scan edge is one more. Where the scan lies along a map edge, the
-    map moves toward it by the scan's share of the weight there, ``1 / (1 + w)`` (weight
+    The map is averaged edge by edge: ``edge_weights`` holds one weight per edge of the
+    map polylines, how many observations saw that edge so far; each scan edge is one
+    more. Where the scan lies along a map edge, the map moves toward it by the scan's
+    share of the weight there, ``1 / (1 + w)`` (weight
     ``0`` replaces the overlapping part by the scan's). Every edge of the result weighs
     what of the map and of the scan lies along it (length-weighted where
     re-simplification joins edges), so a well observed face converges while a face seen
@@ -297,9 +298,9 @@ def merge(
     count) would freeze such a face at its first view.
 
     The ends are averaged as the whole polyline's: ``end_weights[k]`` (e.g. the hit
-    count) is what an end, and a polyline that is a single vertex, weighs against a
-    scan's end. An end keeps the reach that many views gave it against a few that stop
-    short of it by beam spacing, whatever the weight of its last edge.
+    count of ``map_polylines[k]``) is what an end, and a polyline that is a single vertex,
+    weighs against a scan's end. An end keeps the reach that many views gave it against
+    a few that stop short of it by beam spacing, whatever the weight of its last edge.
 
     Parameters
     ----------
@@ -310,12 +311,12 @@ def merge(
         is reversed where it runs the other way along the map polyline.
     epsilon
         Douglas-Peucker tolerance (m) of the re-simplification, ``> 0``.
-    map_weights
-        Per map polyline, one weight ``>= 0`` per edge or one number for all of them.
-        Default: 1 (one observation) each.
+    edge_weights
+        The weights ``>= 0`` of the edges of all map polylines, one polyline after the
+        other (``len(line) - 1`` each, none for fewer than two vertices). Default: 1 (one
+        observation) each.
     end_weights
-        Per map polyline, the weight ``>= 0`` of its ends. Default: the number given as
-        its ``map_weights``, else the mean of its edge weights.
+        Per map polyline, the weight ``>= 0`` of its ends. Default: 1 each.
     end_tolerance
         Ends closer than this (m) are the same end seen again and are averaged; farther
         scan ends extend the map. Default ``END_TOLERANCE_FACTOR * epsilon``.
@@ -345,10 +346,11 @@ def merge(
     >>> chord = [[0.8, 0.0], [1.0, -0.1], [1.0, -1.0]]  # a chord no view supported, a face
     >>> corner_seen = [[0.85, 0.0], [1.0, 0.0], [1.0, -1.0]]
     >>> [(line.points.round(3).tolist(), weights.round(2).tolist()) for line, weights
-    ...  in merge([chord], [[corner_seen]], 0.03, map_weights=[[0.0, 20.0]], end_weights=[20.0])]
+    ...  in merge([chord], [[corner_seen]], 0.03, edge_weights=[0.0, 20.0], end_weights=[20.0])]
     [([[0.802, 0.0], [1.0, 0.0], [1.0, -1.0]], [1.0, 19.0])]
     >>> [line.points.round(3).tolist()  # one weight for the whole polyline: the chord stays
-    ...  for line, _ in merge([chord], [[corner_seen]], 0.03, map_weights=[20.0])]
+    ...  for line, _ in merge([chord], [[corner_seen]], 0.03, edge_weights=[20.0, 20.0],
+    ...                       end_weights=[20.0])]
     [[[0.802, 0.0], [1.0, -0.1], [1.0, -1.0]]]
     """
     if not epsilon > 0.0:
@@ -357,16 +359,16 @@ def merge(
     if not tolerance >= 0.0:
         raise ValueError(f"merge: end_tolerance must be >= 0 m, got {end_tolerance!r}")
     lines = as_polylines(map_polylines)
-    if map_weights is None:
-        map_weights = [1.0] * len(lines)
-    if not (len(lines) == len(observations) == len(map_weights)):
+    if len(observations) != len(lines):
         raise ValueError(
-            "merge: need one observation and one weight per map polyline, got "
-            f"{len(lines)} polylines, {len(observations)} observations, "
-            f"{len(map_weights)} weights"
+            f"merge: need one observation per map polyline, got {len(lines)} polylines and "
+            f"{len(observations)} observations"
         )
-    edge_weights, weights, point_weights = _edge_weights(lines, map_weights, end_weights)
-    weight_offsets = run_offsets(map(len, edge_weights), len(edge_weights))
+    edge_counts = np.maximum(np.diff(lines.offsets) - 1, 0)
+    weight_offsets = run_offsets(edge_counts.tolist(), len(lines))
+    weights = _checked_weights("edge_weights", edge_weights, int(weight_offsets[-1]),
+                               "edge of the map polylines")
+    point_weights = _checked_weights("end_weights", end_weights, len(lines), "map polyline")
     parts = as_polylines([part for line_parts in observations for part in line_parts])
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of parts.
     first_parts = run_offsets(map(len, observations), len(observations))
@@ -375,52 +377,29 @@ def merge(
         first_parts, point_weights, tolerance, epsilon,
     )
     views = PackedPolylines.from_runs(merged[: merged_offsets[-1]], merged_offsets)
-    weight_bounds = merged_weight_offsets.tolist()
-    merged_weights.flags.writeable = False
+    bounds, merged_bounds = weight_offsets.tolist(), merged_weight_offsets.tolist()
+    # (Read-only after the call: the kernel's signature takes writeable arrays.)
+    weights.flags.writeable = merged_weights.flags.writeable = False
     return [
-        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]])
-        if is_changed else (line, edge_weights[k])
+        (view, merged_weights[merged_bounds[k] : merged_bounds[k + 1]]) if is_changed
+        else (line, weights[bounds[k] : bounds[k + 1]])
         for k, (line, view, is_changed) in enumerate(
             zip(lines, views, changed.tolist(), strict=True)
         )
     ]
 
 
-def _edge_weights(
-    lines: PackedPolylines, map_weights: Sequence[float | ArrayLike],
-    end_weights: ArrayLike | None,
-) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
-    """Return the checked edge weights of each map polyline, all of them packed, end weights."""
-    edge_weights, point_weights = [], np.ones(len(lines))
-    for k, (line, weight) in enumerate(zip(lines, map_weights, strict=True)):
-        edges = max(len(line) - 1, 0)
-        if not (isinstance(weight, np.ndarray) and weight.dtype == np.float64):
-            weight = np.asarray(weight, dtype=float)
-        if weight.ndim == 0:
-            point_weights[k] = weight
-            weight = np.full(edges, float(weight))
-        elif weight.shape != (edges,):
-            raise ValueError(
-                f"merge: map_weights of polyline {k} need one value per edge ({edges}), "
-                f"got shape {weight.shape}"
-            )
-        elif edges and end_weights is None:
-            point_weights[k] = weight.mean()
-        edge_weights.append(weight)
-    if end_weights is not None:
-        point_weights = np.asarray(end_weights, dtype=float).reshape(-1)
-        if point_weights.shape != (len(lines),):
-            raise ValueError(
-                f"merge: need one end weight per map polyline ({len(lines)}), got "
-                f"{point_weights.size}"
-            )
-    weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
-    # One check for all (NaN fails too); the message names the first offender.
-    if not (weights.min(initial=0.0) >= 0.0 and point_weights.min(initial=0.0) >= 0.0):
-        k = next(k for k, weight in enumerate(edge_weights)
-                 if not ((weight >= 0.0).all() and point_weights[k] >= 0.0))
-        raise ValueError(f"merge: map_weights must be >= 0, got {map_weights[k]!r}")
-    return edge_weights, weights, point_weights
+def _checked_weights(name: str, given: ArrayLike | None, count: int, what: str) -> np.ndarray:
+    """Return a copy of ``count`` weights ``>= 0`` as float64 (default: 1 each), or say why not."""
+    if given is None:
+        return np.ones(count)
+    weights = np.array(given, dtype=float).reshape(-1)
+    if weights.shape != (count,):
+        raise ValueError(f"merge: {name} needs one value per {what} ({count}), got {weights.size}")
+    # (NaN fails too.)
+    if not weights.min(initial=0.0) >= 0.0:
+        raise ValueError(f"merge: {name} must be >= 0, got {given!r}")
+    return weights
 
 
 def transfer_weights(

@@ -21,7 +21,9 @@ BOX = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.6]])  # two faces of a box
 
 def merge_pair(map_polyline, scan_polyline, epsilon, *, map_weight=1.0, end_tolerance=None):
     """Merge one scan polyline into one map polyline with one weight for the whole of it."""
-    ((line, _),) = merge([map_polyline], [[scan_polyline]], epsilon, map_weights=[map_weight],
+    edges = max(len(map_polyline) - 1, 0)
+    ((line, _),) = merge([map_polyline], [[scan_polyline]], epsilon,
+                         edge_weights=np.full(edges, float(map_weight)), end_weights=[map_weight],
                          end_tolerance=end_tolerance)
     return line
 
@@ -124,7 +126,7 @@ def test_nasty_polylines_go_through_merge(name):
 def test_invalid_arguments_are_rejected():
     with pytest.raises(ValueError, match="epsilon"):
         merge_pair(WALL, WALL, 0.0)
-    with pytest.raises(ValueError, match="map_weight"):
+    with pytest.raises(ValueError, match="edge_weights must be >= 0"):
         merge_pair(WALL, WALL, EPSILON, map_weight=-1.0)
     with pytest.raises(ValueError, match="end_tolerance"):
         merge_pair(WALL, WALL, EPSILON, end_tolerance=-1.0)
@@ -254,14 +256,14 @@ def test_a_face_seen_late_converges_though_the_other_face_weighs_200_views(seed)
     # The second face's first view is bent 5 cm out (grazing incidence, a few readings).
     first = [[0.0, 0.0], [1.0, 0.0], [1.05, -0.3], [1.0, -0.6]]
     one_weight = merge_pair(line, first, EPSILON, map_weight=200.0)
-    (line, weights), = merge([line], [[first]], EPSILON, map_weights=[weights],
+    (line, weights), = merge([line], [[first]], EPSILON, edge_weights=weights,
                                       end_weights=[200.0])
     truth = shapely.LineString(TWO_FACES)
     assert shapely.hausdorff_distance(shapely.LineString(line.points), truth) > 0.045
     for hits in range(201, 221):
         view = _noisy_view(rng, TWO_FACES, 0.005)
         one_weight = merge_pair(one_weight, view, EPSILON, map_weight=float(hits))
-        (line, weights), = merge([line], [[view]], EPSILON, map_weights=[weights],
+        (line, weights), = merge([line], [[view]], EPSILON, edge_weights=weights,
                                           end_weights=[float(hits)])
     # Each edge weighs the views along it: the new face follows its 20 views...
     assert _farthest_from(truth, line) < 0.008
@@ -280,7 +282,7 @@ def test_a_chord_bridging_a_gap_weighs_nothing_and_gives_way_to_the_corner():
     # gap, two readings of its top face; the map extends to them across the gap.
     right_face = Polyline([[1.0, -0.05], [1.0, -0.6]])
     parts = [[[0.70, 0.0], [0.74, 0.0]], [[1.0, -0.06], [1.0, -0.6]]]
-    (line, weights), = merge([right_face], [parts], EPSILON, map_weights=[[50.0]],
+    (line, weights), = merge([right_face], [parts], EPSILON, edge_weights=[50.0],
                                       end_weights=[50.0])
     assert len(line) == 3
     assert weights[0] < 0.2 * weights[1]  # the bridge: hardly seen
@@ -291,7 +293,7 @@ def test_a_chord_bridging_a_gap_weighs_nothing_and_gives_way_to_the_corner():
     for hits in range(51, 56):
         view = np.array([[0.7, 0.0], [1.0, 0.0], [1.0, -0.6]]) + rng.normal(0.0, 0.003, (3, 2))
         one_weight = merge_pair(one_weight, view, EPSILON, map_weight=float(hits))
-        (line, weights), = merge([line], [[view]], EPSILON, map_weights=[weights],
+        (line, weights), = merge([line], [[view]], EPSILON, edge_weights=weights,
                                           end_weights=[float(hits)])
     assert _farthest_from(outline, line) < 0.015  # the corner, within noise
     assert _farthest_from(outline, one_weight) > 0.03  # the chord's weight: the map's
@@ -310,21 +312,23 @@ def test_transfer_weights_matches_hand_computed_pieces():
 
 def test_merge_checks_its_weights():
     with pytest.raises(ValueError, match="one value per edge"):
-        merge([BOX], [[BOX]], EPSILON, map_weights=[[1.0]])
+        merge([BOX], [[BOX]], EPSILON, edge_weights=[1.0])
     with pytest.raises(ValueError, match=">= 0"):
-        merge([BOX], [[BOX]], EPSILON, map_weights=[[1.0, -1.0]])
-    with pytest.raises(ValueError, match="one end weight per map polyline"):
+        merge([BOX], [[BOX]], EPSILON, edge_weights=[1.0, -1.0])
+    with pytest.raises(ValueError, match=">= 0"):
+        merge([BOX], [[BOX]], EPSILON, end_weights=[np.nan])
+    with pytest.raises(ValueError, match="one value per map polyline"):
         merge([BOX], [[BOX]], EPSILON, end_weights=[1.0, 2.0])
-    with pytest.raises(ValueError, match="one observation and one weight"):
+    with pytest.raises(ValueError, match="one observation per map polyline"):
         merge([BOX, WALL], [[BOX]], EPSILON)
-    # A weight given as one number weighs every edge and both ends.
+    # By default every edge and end weighs one observation.
     seen = BOX + np.array([0.0, 0.02])
-    ((line, weights),) = merge([BOX], [[seen]], EPSILON, map_weights=[3.0])
-    ((edges, edge_weights),) = merge([BOX], [[seen]], EPSILON, map_weights=[[3.0, 3.0]],
-                                     end_weights=[3.0])
-    np.testing.assert_array_equal(line.points, edges.points)
-    np.testing.assert_allclose(weights, [4.0, 4.0])
-    np.testing.assert_array_equal(weights, edge_weights)
+    ((line, weights),) = merge([BOX], [[seen]], EPSILON)
+    ((ones, one_weights),) = merge([BOX], [[seen]], EPSILON, edge_weights=[1.0, 1.0],
+                                   end_weights=[1.0])
+    np.testing.assert_array_equal(line.points, ones.points)
+    np.testing.assert_allclose(weights, [2.0, 2.0])
+    np.testing.assert_array_equal(weights, one_weights)
 
 
 def test_many_map_polylines_merge_as_each_alone():
@@ -332,12 +336,16 @@ def test_many_map_polylines_merge_as_each_alone():
     maps = [WALL, BOX, [[5.0, 5.0]], BOX + 2.0, WALL - 1.0]
     observations = [[WALL + 0.02], [BOX[:2] + 0.01, BOX[1:] - 0.01], [[[5.0, 5.1]]], [],
                     [WALL + rng.normal(0.0, 0.01, WALL.shape) - 1.0]]
-    weights = [[2.0], [1.0, 7.0], 3.0, [1.0, 1.0], 5.0]
-    merged = merge(maps, observations, EPSILON, map_weights=weights)
+    edge_weights = [[2.0], [1.0, 7.0], [], [1.0, 1.0], [5.0]]
+    end_weights = [2.0, 4.0, 3.0, 1.0, 5.0]
+    merged = merge(maps, observations, EPSILON, edge_weights=np.concatenate(edge_weights),
+                   end_weights=end_weights)
     for k in range(len(maps)):
         ((alone, alone_weights),) = merge([maps[k]], [observations[k]], EPSILON,
-                                          map_weights=[weights[k]])
+                                          edge_weights=edge_weights[k],
+                                          end_weights=[end_weights[k]])
         np.testing.assert_array_equal(merged[k][0].points, alone.points)
         np.testing.assert_array_equal(merged[k][1], alone_weights)
-    # An observation without vertices leaves its map polyline as it was.
+    # An observation without vertices leaves its map polyline and weights as they were.
     np.testing.assert_array_equal(merged[3][0].points, BOX + 2.0)
+    np.testing.assert_array_equal(merged[3][1], [1.0, 1.0])
