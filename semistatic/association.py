@@ -4,7 +4,7 @@ Scan polylines come in scan order (counter-clockwise around the sensor, from the
 ``angle_min`` on the right to ``angle_max`` on the left). Map polylines are sorted the same
 way around the current viewpoint (:func:`sort_ccw`). The association is then a
 dynamic-time-warping recursion over the two ordered lists with the shape similarity
-``s(S_i, M_j)`` of eq. (1) as cost (DESIGN.md detail 6): the optimal monotone path from
+``s(S_i, M_j)`` of eq. (1) as cost (docs/design.md#detail-6): the optimal monotone path from
 ``(0, 0)`` to ``(n - 1, m - 1)`` may pair one scan polyline with several map polylines and
 vice versa. Every pair on the path is then validated by the restricted Hausdorff gate.
 
@@ -518,7 +518,7 @@ def associate(
     viewpoint: ArrayLike | None = None,
     mode: str = "vertex",
 ) -> ValidatedPairs:
-    """Associate scan polylines with map polylines (paper eq. 4-5, DESIGN.md detail 6).
+    """Associate scan polylines with map polylines (paper eq. 4-5, docs/design.md#detail-6).
 
     The recursion ``A_ij = {(i, j)} + argmin(A_{i-1,j}, A_{i,j-1}, A_{i-1,j-1})`` runs over
     the scan polylines in the given (scan) order and the map polylines in counter-clockwise

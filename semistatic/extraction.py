@@ -1,14 +1,14 @@
-"""Polyline extraction from one laser scan (paper Sec. 3.1, DESIGN.md details 1-3).
+"""Polyline extraction from one laser scan (paper Sec. 3.1, docs/design.md#detail-1 to #detail-3).
 
 The pipeline is a handful of passes over the beams (numpy, and numba where they fuse):
 
 1. :func:`remove_invalid` - drop ``nan``/``inf`` readings and those outside
    ``[range_min, min(range_max, max_range)]``; they never reach any statistic.
 2. :func:`remove_outliers` - drop isolated readings: ``|r_i - mu_i| > alpha sigma_i`` over
-   the ``2k+1`` valid ranges centred on ``i`` (DESIGN.md detail 1).
+   the ``2k+1`` valid ranges centred on ``i`` (docs/design.md#detail-1).
 3. :func:`split_breakpoints` - cut the beam sequence at the Borges & Aldon adaptive
-   breakpoints and at gaps of missing readings (DESIGN.md detail 2).
-4. :func:`douglas_peucker` - keep the vertices GEOS keeps (DESIGN.md detail 3).
+   breakpoints and at gaps of missing readings (docs/design.md#detail-2).
+4. :func:`douglas_peucker` - keep the vertices GEOS keeps (docs/design.md#detail-3).
 
 :func:`extract_polylines` chains them; one compiled Douglas-Peucker (GEOS's recursion and
 arithmetic) simplifies every interval of a scan, and the merge's polylines too.
@@ -82,7 +82,7 @@ def remove_invalid(scan: Scan, max_range: float = math.inf) -> np.ndarray:
 
 
 def remove_outliers(ranges: ArrayLike, valid: ArrayLike, k: int, alpha: float) -> np.ndarray:
-    """Return ``valid`` with isolated readings removed (DESIGN.md detail 1).
+    """Return ``valid`` with isolated readings removed (docs/design.md#detail-1).
 
     For each valid reading ``r_i`` the mean ``mu_i`` and (population) standard deviation
     ``sigma_i`` are taken over the window of ``2k+1`` *valid* ranges centred on it
@@ -174,7 +174,7 @@ def split_breakpoints(
     """Split the usable beams of ``scan`` into intervals of one object each.
 
     Consecutive usable beams ``m < n`` (``valid`` true, everything between them missing)
-    belong to the same interval when both hold (DESIGN.md detail 2):
+    belong to the same interval when both hold (docs/design.md#detail-2):
 
     - at most ``MAX_BRIDGED_GAP`` beams are missing between them, and
     - ``|p_n - p_m| <= r_m sin(dphi) / sin(lam - dphi) + 3 sigma_r`` with
@@ -435,7 +435,7 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     its point-to-*segment* distance is strictly greater than ``epsilon`` (the first one on
     ties): exactly the vertices of
     ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``
-    (DESIGN.md detail 3), repeated and collinear points included, by one compiled kernel:
+    (docs/design.md#detail-3), repeated and collinear points included, by one compiled kernel:
     GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
     operation). Compiled kernels call this function too (the merge does): it compiles to
     the same kernel, without the checks.

@@ -1,7 +1,7 @@
 """Fitted polyline vertices: edges fitted along the beams between Douglas-Peucker corners.
 
 Douglas-Peucker decides *where* a polyline bends; its vertices are raw readings, i.e. the
-noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polylines` keeps the
+noise extremes of their neighbourhoods (docs/design.md#detail-3). :func:`fit_polylines` keeps the
 corners but moves the vertices onto the surface the readings describe:
 
 1. each edge (the readings between two consecutive corners, both included) is fitted

@@ -1,4 +1,4 @@
-"""Restricted Hausdorff distance between polylines (paper eq. 3, DESIGN.md detail 5).
+"""Restricted Hausdorff distance between polylines (paper eq. 3, docs/design.md#detail-5).
 
 The Hausdorff distance of two polylines is the largest distance from a point of one curve
 to the other curve. When one polyline is a partial view of the other it measures the

@@ -1,4 +1,4 @@
-"""Join overlapping map polylines into one (paper Sec. 3.4, DESIGN.md detail 8).
+"""Join overlapping map polylines into one (paper Sec. 3.4, docs/design.md#detail-8).
 
 After merging, a map may hold two polylines of one object: pieces seen apart that grew
 into each other, or a new polyline that repeats part of an older one. Two polylines
@@ -81,7 +81,7 @@ def overlapping_groups(
     gate: float,
     mode: str = "vertex",
 ) -> list[list[int]]:
-    """Return the groups of two or more overlapping polylines (DESIGN.md detail 8).
+    """Return the groups of two or more overlapping polylines (docs/design.md#detail-8).
 
     Two polylines overlap when their restricted Hausdorff distance (``mode``) is at most
     ``gate`` and their extents overlap: the orthogonal projections of one onto the other

@@ -4,7 +4,7 @@
 extract polylines in the sensor frame, move them into the map frame with the sensor pose,
 sort the map polylines counter-clockwise from that viewpoint, associate, merge, insert the
 unassociated scan polylines as new objects, join overlapping polylines, and run the object
-life cycle (DESIGN.md detail 10):
+life cycle (docs/design.md#detail-10):
 
 - an associated map polyline is ``"confirmed"`` (hits + 1, misses reset to 0);
 - an unassociated scan polyline becomes a ``"new"`` map polyline, reported at once;
@@ -92,7 +92,7 @@ MAX_MERGE_WEIGHT = 1000
 # The restriction of the restricted Hausdorff distance that decides which polylines are
 # joined, whatever params.hausdorff_restriction says: joining removes redundant copies, and
 # a copy of part of a long wall simplified to two vertices is exactly what the vertex
-# restriction cannot recognise (DESIGN.md detail 5); with it, a robot driving along a
+# restriction cannot recognise (docs/design.md#detail-5); with it, a robot driving along a
 # corridor leaves dozens of overlapping wall fragments in the map.
 JOIN_RESTRICTION = "projection"
 

@@ -1,17 +1,18 @@
 """Merge a scan polyline into its map polyline (joining map polylines: :mod:`semistatic.join`).
 
-Paper Sec. 3.4 and DESIGN.md details 7-8. The vertices of the scan polyline are projected
-onto the map polyline and inserted by their arc-length position; where the scan sees
-farther than the map at either end, the map is extended with the scan's vertices; the
-result is simplified again with Douglas-Peucker.
+Paper Sec. 3.4 and docs/design.md#detail-7, #detail-8. The vertices of the scan polyline
+are projected onto the map polyline and inserted by their arc-length position; where the
+scan sees farther than the map at either end, the map is extended with the scan's
+vertices; the result is simplified again with Douglas-Peucker.
 
 Merging is also an averaging step, so that repeated observations of an unchanged object
 converge instead of drifting or growing:
 
 - a map polyline that summarises ``w`` observations moves toward the scan by
-  ``alpha = 1 / (1 + w)`` (edge and end weights ``w``): each map vertex that faces the scan moves
-  ``alpha`` of the way to its nearest point on the scan polyline, and each inserted scan
-  vertex lies ``alpha`` of the way from its projection on the map to where the scan saw it.
+  ``alpha = 1 / (1 + w)`` (edge and end weights ``w``): each map vertex that faces the
+  scan moves ``alpha`` of the way to its nearest point on the scan polyline, and each
+  inserted scan vertex lies ``alpha`` of the way from its projection on the map to where
+  the scan saw it.
   Vertices inserted close to a map edge are collinear with it and removed by
   Douglas-Peucker, so the vertex count stays that of the shape, not of the observations;
 - an end of the scan within ``end_tolerance`` of the map's end (noise, beam spacing) moves
@@ -279,7 +280,7 @@ def merge(
     end_weights: ArrayLike | None = None,
     end_tolerance: float | None = None,
 ) -> list[tuple[Polyline, np.ndarray]]:
-    """Merge what one observation saw of each map polyline into it (DESIGN.md detail 7).
+    """Merge what one observation saw of each map polyline into it (docs/design.md#detail-7).
 
     ``observations[k]`` are the scan polylines one scan associated with
     ``map_polylines[k]``: usually one, several when an occluder cut the object in pieces.
@@ -497,7 +498,7 @@ def _merge_all(
                 line_weights = _weights_of(along, old_weights)
                 line_totals = _weights_of(along, old_totals)
             else:
-                # The merge proper (DESIGN.md detail 7), written out here rather than as a
+                # The merge proper (docs/design.md#detail-7), written out here rather than as a
                 # kernel of its own: numba re-optimises a callee's whole code inside each
                 # caller, so one level less halves the compilation of everything below.
                 # First the scan's direction along the map, and the map's ends the scan
@@ -638,7 +639,7 @@ def _merge_all(
                 totals += _weights_of(_edges_along(candidates, new, tolerance), new_weights)
                 line, line_weights = candidates, _weights_of(along, old_weights)
                 line_totals = totals
-            # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
+            # Simplified again (docs/design.md#detail-3); one vertex stays as it is.
             kept = douglas_peucker(line, epsilon)
             line_weights = _kept_weights(line, line_weights, kept)
             line_totals = _kept_weights(line, line_totals, kept)

@@ -1,7 +1,7 @@
 """The polyline: an ordered vertex list that remembers which laser beams it came from.
 
 A polyline is an ``(N, 2)`` float64 vertex array plus the scan index of each vertex
-(DESIGN.md, conventions). The restricted Hausdorff distance and the merge rely on the
+(docs/design.md, Conventions). The restricted Hausdorff distance and the merge rely on the
 vertex order, and scan polylines run counter-clockwise around the viewpoint. Both arrays
 are read-only, so a ``Polyline`` can be shared and its derived quantities cached. Many
 polylines travel together as :class:`PackedPolylines`: a read-only list of them that also

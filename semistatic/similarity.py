@@ -8,7 +8,7 @@ keeps turning left has an increasing ``T`` without 2 pi jumps. The similarity is
     s(P0, P1) = (integral (T1 - T0 - theta_0)^2 ds) * max(l1 / l0, l0 / l1),
     theta_0 = integral (T1 - T0) ds,
 
-where ``theta_0`` is the rotation that minimises the integral (DESIGN.md detail 4; the
+where ``theta_0`` is the rotation that minimises the integral (docs/design.md#detail-4; the
 paper's ``+ theta_0`` is read as this minimiser). The integral is exact: both step
 functions are constant between consecutive breakpoints of their union. ``s`` is 0 for
 rigidly moved copies, grows with shape difference and with length ratio, and is

@@ -3,12 +3,12 @@
 Two parts of the mapper reason about single beams rather than whole polylines:
 
 - :func:`visibility` casts the scan's beams at map polylines and compares each beam's
-  reading with the range at which it would hit them. The object life cycle (DESIGN.md
-  detail 10) deletes a map polyline only after it was missed while it *should have been
-  visible*: in view, unoccluded, and read through (``Visibility.missing``). Where only
-  part of a polyline is read through, that part is free space (an object moved along its
-  own face: the map's ends agree with the scan, its middle does not): the free-space cut
-  removes it (``Visibility.pieces``);
+  reading with the range at which it would hit them. The object life cycle
+  (docs/design.md#detail-10) deletes a map polyline only after it was missed while it
+  *should have been visible*: in view, unoccluded, and read through
+  (``Visibility.missing``). Where only part of a polyline is read through, that part is
+  free space (an object moved along its own face: the map's ends agree with the scan,
+  its middle does not): the free-space cut removes it (``Visibility.pieces``);
 - :func:`extend_ends` removes the bias of scan polylines' ends, which the last beam on an
   object leaves up to half a beam gap short of its true end.
 
@@ -206,7 +206,7 @@ class Visibility:
     def missing(self) -> np.ndarray:
         """Return which polylines should have been seen, and the scan reads through them.
 
-        A polyline should have been visible (DESIGN.md detail 10) when at least
+        A polyline should have been visible (docs/design.md#detail-10) when at least
         ``min_points`` beams, and at least ``MIN_VISIBLE_FRACTION`` of the beams in view,
         see it unoccluded; it is missing when moreover most (``MISSING_FRACTION``) of its
         unoccluded beams read clearly beyond it. A polyline the scan reads right where it

@@ -56,7 +56,7 @@ def test_split_wall_is_many_to_one_in_projection_mode():
     wall_line = np.array([[3.0, -2.0], [3.0, 2.0]])
     lower, upper = [[3.02, -1.9], [3.02, -0.3]], [[3.02, 0.3], [3.02, 1.9]]
     assert associate([lower, upper], [wall_line], GATE, mode="projection") == [(0, 0), (1, 0)]
-    # The paper's vertex restriction cannot shorten a two-vertex wall (DESIGN.md detail 5).
+    # The paper's vertex restriction cannot shorten a two-vertex wall (docs/design.md#detail-5).
     assert associate([lower, upper], [wall_line], GATE, mode="vertex") == []
 
 

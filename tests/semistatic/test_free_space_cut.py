@@ -152,7 +152,7 @@ def test_beam_counts_of_many_polylines_match_geos(seed):
         seen_through = unoccluded & (scan.ranges > expected + margin)
         counts = (seen.in_view[k], seen.unoccluded[k], seen.seen_through[k])
         assert counts == (in_view.sum(), unoccluded.sum(), seen_through.sum())
-        # DESIGN.md detail 10: should have been visible, and read through.
+        # docs/design.md#detail-10: should have been visible, and read through.
         visible = unoccluded.sum() >= max(params.min_points,
                                           math.ceil(MIN_VISIBLE_FRACTION * in_view.sum()))
         read_through = seen_through.sum() >= MISSING_FRACTION * unoccluded.sum()

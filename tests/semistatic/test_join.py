@@ -1,4 +1,4 @@
-"""Join (paper Sec. 3.4, DESIGN.md detail 8)."""
+"""Join (paper Sec. 3.4, docs/design.md#detail-8)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def overlaps(p0, p1, gate, mode="vertex"):
 
 
 def reference_overlaps(p0, p1, gate, mode):
-    """DESIGN.md detail 8 for one pair, extents by GEOS linear referencing."""
+    """docs/design.md#detail-8 for one pair, extents by GEOS linear referencing."""
     def distinct(points):
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         keep = np.concatenate(([True], np.hypot(*np.diff(points, axis=0).T) > 1e-9))

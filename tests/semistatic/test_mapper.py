@@ -1,4 +1,4 @@
-"""The polyline map update and the object life cycle (paper Sec. 3-4, DESIGN.md detail 10)."""
+"""The polyline map update and the object life cycle (paper Sec. 3-4, docs/design.md#detail-10)."""
 
 from __future__ import annotations
 
@@ -322,7 +322,7 @@ def counts(polyline, scan, params=None):
 
 
 def should_be_visible(in_view, unoccluded):
-    """DESIGN.md detail 10: enough beams, and most of those in view, see it unoccluded."""
+    """docs/design.md#detail-10: enough beams, and most of those in view, see it unoccluded."""
     return unoccluded > 0 and unoccluded >= max(MapperParams().min_points,
                                                 math.ceil(MIN_VISIBLE_FRACTION * in_view))
 
@@ -439,7 +439,7 @@ def test_corridor_drive_keeps_one_polyline_per_object(mode):
 
 def test_joins_use_the_projection_restriction_whatever_the_association_uses():
     # A copy of part of a long wall simplified to two vertices: what the vertex restriction
-    # cannot recognise (DESIGN.md detail 5), so joining by it would leave wall fragments.
+    # cannot recognise (docs/design.md#detail-5), so joining by it would leave wall fragments.
     long_wall, copy = [[0.0, 1.5], [14.0, 1.5]], [[5.0, 1.51], [7.0, 1.51]]
     assert overlapping_groups([long_wall, copy], [False, True], 0.12, "vertex") == []
     assert overlapping_groups([long_wall, copy], [False, True], 0.12, "projection") == [[0, 1]]

@@ -1,4 +1,4 @@
-"""Merge (paper Sec. 3.4, DESIGN.md detail 7)."""
+"""Merge (paper Sec. 3.4, docs/design.md#detail-7)."""
 
 from __future__ import annotations
 
