@@ -150,12 +150,7 @@ def reference_associate(scans, maps, gate, *, viewpoint=None, mode="vertex"):
 def test_map_entries_after_updates_are_valid_map_polylines():
     # The update replaces the entries it touches without re-validating them (its changes
     # are valid by construction): the validated constructor must accept them as they are.
-    rng = np.random.default_rng(3)
-    world = _hall()
-    mapper = PolylineMap()
-    for k in range(6):
-        pose = rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05])
-        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    mapper = _hall_mapped(seed=3, updates=6, jitter=[0.1, 0.1, 0.05])
     assert len(mapper) >= 3
     for entry in mapper:
         assert dataclasses.replace(entry) == entry
@@ -168,6 +163,17 @@ def _hall():
     parts = [wall((3.0, -1.0), (3.0, 1.0)), wall((-1.0, 2.5), (1.5, 2.5))]
     parts += [box((1.5, -2.0), 0.5, 0.3, yaw=0.3), box((-2.0, -1.0), 0.4, 0.4, yaw=1.0)]
     return scene(*parts)
+
+
+def _hall_mapped(seed, updates, jitter):
+    """A map of :func:`_hall` from ``updates`` noisy scans, poses within ``jitter`` of 0."""
+    rng = np.random.default_rng(seed)
+    world = _hall()
+    mapper = PolylineMap()
+    for k in range(updates):
+        pose = rng.uniform(np.negative(jitter), jitter)
+        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    return mapper
 
 
 def _run(scans, poses):
@@ -316,12 +322,7 @@ def test_the_similarities_decide_only_where_the_gate_leaves_two_paths(monkeypatc
 
 def test_a_typical_update_computes_no_similarity(monkeypatch):
     calls = _spied_similarity(monkeypatch)
-    rng = np.random.default_rng(4)
-    world = _hall()
-    mapper = PolylineMap()
-    for k in range(4):
-        pose = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02])
-        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    mapper = _hall_mapped(seed=4, updates=4, jitter=[0.05, 0.05, 0.02])
     assert len(mapper) >= 3
     assert calls == []
 
