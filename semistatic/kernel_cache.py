@@ -1,4 +1,4 @@
-"""Compile the numba kernels missing from the cache on every core before a run (issue 13).
+"""Compile the numba kernels missing from the cache on every core before a run.
 
 The kernels compile on first use and are cached on disk (``@njit(cache=True)``), so the
 first run after installation compiles them all, one after the other on one core, and so
