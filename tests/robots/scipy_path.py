@@ -32,10 +32,12 @@ class ScipyPath:
         self.length = float(self.knot_s[-1])
 
     def _integral(self, t0, t1):
+        """Return the arc length from ``t0`` to ``t1`` (adaptive quadrature of ``|r'(t)|``)."""
         value, _ = quad(lambda t: np.hypot(*self.velocity(t)), t0, t1, epsabs=1e-13, epsrel=1e-13)
         return value
 
     def t(self, s):
+        """Return the spline parameter at arc length ``s`` (clamped to the path)."""
         s = min(max(s, 0.0), self.length)
         piece = min(np.searchsorted(self.knot_s, s, side="right") - 1, self.knot_t.size - 2)
         t0, t1 = self.knot_t[piece], self.knot_t[piece + 1]
@@ -44,16 +46,14 @@ class ScipyPath:
         return brentq(lambda t: self.knot_s[piece] + self._integral(t0, t) - s, t0, t1, xtol=1e-14)
 
     def point(self, s):
+        """Return the curve point at arc length ``s``."""
         return self.spline(self.t(s))
 
-    def heading(self, s):
-        dx, dy = self.velocity(self.t(s))
-        return math.atan2(dy, dx)
-
-    def curvature(self, s):
+    def frame(self, s):
+        """Return the point, heading and curvature at ``s`` (one inversion of ``S(t)``)."""
         t = self.t(s)
         (dx, dy), (ddx, ddy) = self.velocity(t), self.acceleration(t)
-        return (dx * ddy - dy * ddx) / math.hypot(dx, dy) ** 3
+        return self.spline(t), math.atan2(dy, dx), (dx * ddy - dy * ddx) / math.hypot(dx, dy) ** 3
 
     def s(self, t):
         """Return the arc length at the spline parameter ``t``."""
