@@ -128,6 +128,7 @@ def biased_runs():
 # ---------------------------------------------------------------- acceptance: consistency
 
 
+@pytest.mark.slow
 def test_without_a_bias_state_the_range_bias_makes_the_filter_overconfident(biased_runs):
     stats = summary(biased_runs["three"])
     report("3-state, biased laser", stats)
@@ -137,6 +138,7 @@ def test_without_a_bias_state_the_range_bias_makes_the_filter_overconfident(bias
     assert stats["normalised_rms"][:2].max() > 1.5
 
 
+@pytest.mark.slow
 def test_with_a_bias_state_the_filter_is_consistent_and_finds_the_bias(biased_runs):
     results = biased_runs["four"]
     stats = summary(results)
@@ -164,6 +166,7 @@ def test_with_a_bias_state_the_filter_is_consistent_and_finds_the_bias(biased_ru
     assert low <= np.mean(full_nees) <= high
 
 
+@pytest.mark.slow
 def test_with_a_bias_state_the_pose_is_more_accurate_under_a_bias(biased_runs):
     three = summary(biased_runs["three"])["rmse_xy"]
     four = summary(biased_runs["four"])["rmse_xy"]
@@ -171,6 +174,7 @@ def test_with_a_bias_state_the_pose_is_more_accurate_under_a_bias(biased_runs):
     assert four < 0.75 * three
 
 
+@pytest.mark.slow
 def test_with_zero_true_bias_four_states_are_as_accurate_as_three():
     three = summary(monte_carlo(THREE_STATE, zero_bias=True, runs=30))
     four = summary(monte_carlo(FOUR_STATE, zero_bias=True, runs=30))
@@ -181,6 +185,7 @@ def test_with_zero_true_bias_four_states_are_as_accurate_as_three():
         assert stats["low"] <= stats["mean_nees"].mean() <= stats["high"]
 
 
+@pytest.mark.slow
 def test_a_drifting_bias_is_tracked_with_its_random_walk_and_lost_without():
     walk, runs, steps = 0.002, 20, 300
     z = {}
