@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test test-all run bench bench-all accuracy fuzz lint clean
+.PHONY: install test test-all run bench bench-all accuracy fuzz lint docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -21,8 +21,12 @@ install: $(STAMP)
 lint: install
 	$(VENV)/bin/ruff check .
 
+# The documentation site, warnings as errors (broken links and anchors fail): build/site/.
+docs: install
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+
 # The fast suite (pyproject's addopts leave out the slow, bench, accuracy and fuzz markers).
-test: lint
+test: lint docs
 	$(PY) -m pytest -q
 
 # Every test including the slow ones (closed-loop determinism of every bundled scenario,
@@ -48,4 +52,4 @@ fuzz: install
 	$(PY) -m pytest -q -m fuzz tests/scenarios/test_fuzz.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) $(OUT) build .pytest_cache .ruff_cache .hypothesis

@@ -1,4 +1,4 @@
-"""Suite-wide pytest configuration: the doctests that drive whole laps run with the slow tests.
+"""Test-suite set-up shared by the tests and the packages' doctests.
 
 Doctests cannot carry a marker, so the few whose examples run a bundled scenario's closed
 loop (tens of seconds each, a fifth of ``make test``) are marked ``slow`` here by name:
@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import pytest
 
+from semistatic.kernel_cache import warm_kernel_cache
+
 # Measured with --durations (warm cache, one core): 21, 13, 10, 8 and 5 s.
 CLOSED_LOOP_DOCTESTS = {
     "scenarios.bench.testbench.Testbench.run_lap",
@@ -18,6 +20,16 @@ CLOSED_LOOP_DOCTESTS = {
     "scenarios.bench.sharing",
     "scenarios.bench.runner.run_scenario",
 }
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """Compile the mapper's kernels ahead of the tests, on every core, once per session.
+
+    A library call never compiles ahead (``Testbench.reset`` starts no process); the
+    command line and this suite ask for it.
+    """
+    warm_kernel_cache()
 
 
 @pytest.hookimpl(tryfirst=True)  # before -m deselects by marker

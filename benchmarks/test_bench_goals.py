@@ -34,7 +34,7 @@ import scenarios.bench.testbench as testbench_module
 from benchmarks.test_bench_mapper import SCANS, hall, replayed_ms
 from robots.ekf import EKFLocalizer
 from robots.follower import ChainedFormFollower
-from scenarios.bench.observers import ScanCallback
+from scenarios.bench.observer import ScanCallback
 from scenarios.bench.runner import run_scenario
 from scenarios.bench.vehicle import Vehicle
 from scenarios.spec.load import load_scenario

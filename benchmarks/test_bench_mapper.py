@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import scenarios.bench.testbench as testbench_module
-from scenarios.bench.observers import ScanCallback
+from scenarios.bench.observer import ScanCallback
 from scenarios.spec.load import load_scenario
 from semistatic.local_map import LocalMap
 from semistatic.mapper import PolylineMap

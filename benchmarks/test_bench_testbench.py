@@ -15,7 +15,7 @@ import pytest
 from robots.follower import ChainedFormFollower, FollowerParams
 from robots.path import SplinePath
 from robots.presets import PIONEER3DX
-from scenarios.bench.runner import Schedule
+from scenarios.bench.clock import Schedule
 from sim.client import SimClient
 from sim.contacts import ContactMonitor
 from sim.encoders import WheelEncoders

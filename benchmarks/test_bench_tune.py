@@ -35,7 +35,8 @@ import optuna
 import pytest
 
 from scenarios.bench.runner import run_scenario
-from scenarios.logs.recording import ScanRecorder, read_recording, replay
+from scenarios.logs.recording import ScanRecorder, read_recording
+from scenarios.logs.recording_replay import replay_recording
 from scenarios.results.outputs import summarize
 from scenarios.spec.load import load_scenario
 from scenarios.tuning.params import parse_params
@@ -87,7 +88,7 @@ def test_replay_equals_resimulation_and_is_faster(pal1_recording):
         simulated = summarize(run_scenario(spec))
         full.append(time.perf_counter() - started)
         started = time.perf_counter()
-        metrics = replay(recording, spec)
+        metrics = replay_recording(recording, spec)
         replayed.append(time.perf_counter() - started)
         stages.append(metrics["performance"]["replay_stages_s"])
         assert metrics["table1_cm"] == simulated["table1_cm"], overrides

@@ -17,12 +17,11 @@ from __future__ import annotations
 
 import argparse
 
-from scenarios import Testbench, load_scenario
-from scenarios.bench.policies import FieldReadings, FieldView
+from scenarios import FieldPolicy, FieldReadings, FieldView, Testbench, load_scenario
 from scenarios.results.outputs import summarize
 
 
-class ShortWarning:
+class ShortWarning(FieldPolicy):
     """Count warning-field readings only up to ``reach`` metres ahead of the robot."""
 
     def __init__(self, reach: float) -> None:

@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from scenarios import Testbench, load_scenario
+from scenarios import Observer, Testbench, load_scenario
 
 ZONE_COLOURS = {"warning": "tab:orange", "protective": "tab:red"}
 
 
-class SpeedAndZone:
+class SpeedAndZone(Observer):
     """Keep time, forward speed, position sigma and zone of every physics tick."""
 
     def __init__(self) -> None:

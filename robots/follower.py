@@ -112,6 +112,8 @@ class FollowerParams:
         Half-width (m) of the arc-length window searched for the progress around the
         previous one; larger than the distance travelled in one control tick.
 
+    Notes
+    -----
     Any limit may be ``math.inf`` (no limit).
 
     Examples

@@ -4,8 +4,8 @@ A run's noise comes from one :class:`numpy.random.SeedSequence` built from the s
 each component (a laser, the wheel encoders, a person, a user's script) draws from its
 own child sequence, keyed by the component's *name* rather than by the order in which
 components were created. Adding a sensor, or drawing more numbers in one component,
-therefore leaves every other component's noise unchanged (DESIGN.md "Conventions",
-STYLE.md habit 16), and the same seed gives the same streams.
+therefore leaves every other component's noise unchanged (docs/design.md, conventions),
+and the same seed gives the same streams.
 
 Examples
 --------
@@ -50,6 +50,8 @@ class RandomStreams:
     seed
         The scenario seed (an integer >= 0).
 
+    Notes
+    -----
     A component's generator is the child of ``SeedSequence(seed)`` with spawn key
     ``(component_key(name),)``; asking twice for the same name gives two generators
     that repeat the same numbers, so ask once per component.

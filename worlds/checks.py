@@ -3,7 +3,7 @@
 The robot drives the world's path; at arc length ``s`` it carries the warning and
 protective fields of the segment it is on, placed at ``path.pose(s)``. A good layout
 (paper Sec. 6: "obstacles have been placed so that [...] such objects partially or
-totally lie inside the warning or the protective areas", DESIGN.md) has
+totally lie inside the warning or the protective areas", docs/design.md) has
 
 - at least three reflective posts in view from every path pose (three-object
   triangulation, paper Sec. 5.1), the line of sight blocked by walls and boxes;

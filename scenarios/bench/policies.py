@@ -16,11 +16,11 @@ speed (never less than ``safety.min_protective_depth``), grown by
 person in front of or beside the vehicle always stops it, and a field drawn too short
 does not hide them.
 
-Write a policy as any object with a ``name`` and a ``counted_readings(view)`` method
-(and, optionally, ``start_lap(local_maps)``, called as each lap starts with the maps of
-the laps before)::
+Write a policy as a subclass of :class:`FieldPolicy` with a ``name`` and a
+``counted_readings(view)`` method (and, where it needs them, the hooks ``start_lap`` and
+``refresh_segment``)::
 
-    class IgnoreWarning:
+    class IgnoreWarning(FieldPolicy):
         name = "ignore-warning"
 
         def counted_readings(self, view):
@@ -38,14 +38,14 @@ Examples
 Traceback (most recent call last):
 ...
 ValueError: policy: unknown field policy 'cautious'; bundled: conservative, adaptive \
-(or pass an object with name and counted_readings(view))
+(or pass a scenarios.FieldPolicy object)
 """
 
 from __future__ import annotations
 
+import abc
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 import shapely
@@ -140,24 +140,37 @@ ALL_READINGS = FieldReadings()
 """Every reading counts for both fields (a plain safety scanner)."""
 
 
-@runtime_checkable
-class FieldPolicy(Protocol):
-    """The protocol of a field policy (see the module docstring); ``start_lap`` is optional.
+class FieldPolicy(abc.ABC):
+    """Base class of field policies: which readings count against a segment's fields.
+
+    A subclass sets ``name`` and implements :meth:`counted_readings`; the two lap hooks do
+    nothing unless overridden.
 
     Examples
     --------
-    >>> isinstance(ConservativePolicy(), FieldPolicy)
-    True
+    >>> class IgnoreWarning(FieldPolicy):
+    ...     name = "ignore-warning"
+    ...     def counted_readings(self, view):
+    ...         return FieldReadings(warning=np.zeros(len(view.points), dtype=bool))
+    >>> field_policy(IgnoreWarning()).name
+    'ignore-warning'
     """
 
-    name: str
+    name: str = ""
+    """The policy's name, as metrics.json and the summaries report it."""
 
+    @abc.abstractmethod
     def counted_readings(self, view: FieldView) -> FieldReadings | None:
-        """Return the readings of ``view.points`` that count for each field."""
-        ...
+        """Return the readings of ``view.points`` that count for each field (``None``: all)."""
+
+    def start_lap(self, local_maps: Mapping[str, LocalMap]) -> None:  # noqa: B027 (a hook)
+        """Prepare for a lap; ``local_maps`` are the segments' maps of the laps before."""
+
+    def refresh_segment(self, name: str, local_map: LocalMap) -> None:  # noqa: B027 (a hook)
+        """Take segment ``name``'s map: it was just merged with what the fleet shares."""
 
 
-class ConservativePolicy:
+class ConservativePolicy(FieldPolicy):
     """Every reading counts: the fields as configured, whatever the local maps know.
 
     Examples
@@ -173,7 +186,7 @@ class ConservativePolicy:
         return None
 
 
-class AdaptivePolicy:
+class AdaptivePolicy(FieldPolicy):
     """Readings explained by known semi-static objects do not count (paper Sec. 4).
 
     At each lap start the policy takes the *confirmed* polylines of every segment's local
@@ -272,13 +285,13 @@ def field_policy(policy: str | FieldPolicy) -> FieldPolicy:
         if policy not in _BUNDLED:
             raise ValueError(
                 f"policy: unknown field policy {policy!r}; bundled: {', '.join(POLICIES)} "
-                "(or pass an object with name and counted_readings(view))"
+                "(or pass a scenarios.FieldPolicy object)"
             )
         return _BUNDLED[policy]()
-    if not isinstance(policy, FieldPolicy) or not isinstance(policy.name, str):
+    if not isinstance(policy, FieldPolicy) or not (isinstance(policy.name, str) and policy.name):
         raise ValueError(
-            f"policy: {policy!r} is no field policy: it needs a name (str) and a "
-            "counted_readings(view) method"
+            f"policy: {policy!r} is no field policy: subclass scenarios.FieldPolicy, give it "
+            "a name (str) and a counted_readings(view) method"
         )
     return policy
 

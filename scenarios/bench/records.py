@@ -3,12 +3,10 @@
 :class:`~scenarios.bench.testbench.Testbench` fills these as it runs;
 ``scenarios.results.metrics`` and ``scenarios.results.outputs`` turn them into numbers and
 files, ``scenarios.logs.bag`` into a ROS 2 bag.
-:class:`Schedule` is the clock every sensor and the controller run on.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,56 +19,7 @@ from semistatic.mapper import UpdateReport
 from semistatic.types import Scan
 from worlds.spec import WorldSpec
 
-__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule", "combine_logs"]
-
-
-class Schedule:
-    """Fire at ``rate_hz`` on a physics clock of ``physics_hz``, with no drift.
-
-    Step ``n`` is due when ``floor(n * rate / physics)`` increases, so a 50 Hz task on a
-    240 Hz clock fires 50 times per simulated second, every 4 or 5 steps.
-
-    Examples
-    --------
-    >>> schedule = Schedule(50.0, 240.0)
-    >>> sum(schedule.due(n) for n in range(1, 241))
-    50
-    """
-
-    def __init__(self, rate_hz: float, physics_hz: float) -> None:
-        self.ratio = rate_hz / physics_hz
-
-    def _count(self, step: int) -> int:
-        """Return how many times the task ran up to physics step ``step``."""
-        return math.floor(step * self.ratio + 1e-9)
-
-    def due(self, step: int) -> bool:
-        """Return whether the task runs at physics step ``step`` (counted from 1)."""
-        return self._count(step) > self._count(step - 1)
-
-    def next_due(self, step: int) -> int:
-        """Return the first step after ``step`` at which the task runs.
-
-        The same decisions as :meth:`due` (the count is monotone in the step), found
-        from the rate in a few evaluations instead of one per physics step: the closed
-        loop asks once per firing, not three times per tick.
-
-        Examples
-        --------
-        >>> schedule = Schedule(50.0, 240.0)
-        >>> schedule.next_due(0), schedule.next_due(5), schedule.next_due(10)
-        (5, 10, 15)
-        >>> [n for n in range(1, 30) if schedule.due(n)]
-        [5, 10, 15, 20, 24, 29]
-        """
-        target = self._count(step) + 1
-        # The real-valued solution of count(m) = target, then exact steps to the first m.
-        candidate = max(step + 1, math.ceil((target - 1e-9) / self.ratio))
-        while candidate > step + 1 and self._count(candidate - 1) >= target:
-            candidate -= 1
-        while self._count(candidate) < target:
-            candidate += 1
-        return candidate
+__all__ = ["LapLog", "RunLog", "ScanRecord", "combine_logs"]
 
 
 @dataclass
@@ -156,9 +105,9 @@ class RunLog:
 
     The robot's side (poses, laps, maps after each lap, timings) is filled by the
     :class:`~scenarios.bench.testbench.Testbench`; ``table1_distances``, ``reference_maps``
-    and ``example_pair`` by :class:`~scenarios.bench.observers.Table1Reference`, the lap logs'
+    and ``example_pair`` by :class:`~scenarios.bench.scoring.Table1Reference`, the lap logs'
     detection figures and ``truth_after_lap`` by
-    :class:`~scenarios.bench.observers.GroundTruthScoring`; ``sharing`` (the segment-map
+    :class:`~scenarios.bench.scoring.GroundTruthScoring`; ``sharing`` (the segment-map
     traffic) by :class:`~scenarios.bench.sharing.SegmentPublisher` when the scenario shares.
 
     Examples

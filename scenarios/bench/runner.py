@@ -2,27 +2,26 @@
 
 Two maps are fed by the same scans:
 
-- the paper's Table 1 experiment (:class:`~scenarios.bench.observers.Table1Reference`): lap 1
+- the paper's Table 1 experiment (:class:`~scenarios.bench.scoring.Table1Reference`): lap 1
   builds a reference map per segment; later laps only associate against it and record
   the restricted Hausdorff distances;
 - the operating system of Sec. 4: one :class:`~semistatic.local_map.LocalMap` per
   segment, updated every scan with the life cycle, whose known objects drive the
   ``adaptive`` field policy.
 
-The log types live in :mod:`scenarios.bench.records` and are re-exported here.
+The log types live in :mod:`scenarios.bench.records`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from scenarios.bench.observers import ProgressReporter, ScanCallback
-from scenarios.bench.policies import known_objects
-from scenarios.bench.records import LapLog, RunLog, ScanRecord, Schedule
+from scenarios.bench.observer import Observer, ProgressReporter, ScanCallback
+from scenarios.bench.records import RunLog, ScanRecord
 from scenarios.bench.testbench import Testbench
 from scenarios.spec.scenario import ScenarioSpec
 
-__all__ = ["LapLog", "RunLog", "ScanRecord", "Schedule", "known_objects", "run_scenario"]
+__all__ = ["run_scenario"]
 
 
 def run_scenario(
@@ -31,7 +30,7 @@ def run_scenario(
     gui: bool = False,
     progress: Callable[[float], None] | None = None,
     on_scan: Callable[[ScanRecord], None] | None = None,
-    observers: Sequence[object] = (),
+    observers: Sequence[Observer] = (),
 ) -> RunLog:
     """Run every lap of ``spec`` in a fresh PyBullet world and return the log.
 

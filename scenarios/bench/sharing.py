@@ -20,12 +20,13 @@ Examples
 
 from __future__ import annotations
 
+from scenarios.bench.observer import Observer, VehicleView
 from semistatic.fleet import FleetMapStore
 
 __all__ = ["SegmentPublisher"]
 
 
-class SegmentPublisher:
+class SegmentPublisher(Observer):
     """Observer: publish each segment's local map to ``store`` when the vehicle leaves it.
 
     Parameters
@@ -36,18 +37,18 @@ class SegmentPublisher:
         The publishing vehicle's index.
     segment_names
         The fleet's segment names in path order (a message names a segment by its place
-        there); default: the bench's segments.
+        there); default: the vehicle's segments.
 
+    Notes
+    -----
     The last segment of the last lap is published when the run ends. The traffic totals
-    and per-message arrays go to ``bench.log.sharing`` at every lap end.
+    and per-message arrays go to ``vehicle.log.sharing`` at every lap end.
 
     Examples
     --------
     >>> SegmentPublisher().store.totals()
     {'messages': 0, 'bytes': 0, 'grid_bytes': 0}
     """
-
-    reads_map_polylines = False  # reads the maps at segment changes, not every scan
 
     def __init__(self, store: FleetMapStore | None = None, sender: int = 0,
                  segment_names: list[str] | None = None) -> None:
@@ -57,29 +58,29 @@ class SegmentPublisher:
         self._segment: str | None = None
         self._entered = 0.0
 
-    def on_scan(self, bench, record) -> None:
+    def on_scan(self, vehicle: VehicleView, record) -> None:
         """Publish the segment the vehicle just left (when the scan is in a new one)."""
         if record.segment != self._segment:
             if self._segment is not None:
-                self._publish(bench, record.scan.stamp)
+                self._publish(vehicle, record.scan.stamp)
             self._segment = record.segment
             self._entered = record.scan.stamp
 
-    def on_lap_end(self, bench, lap_log) -> None:
+    def on_lap_end(self, vehicle: VehicleView, lap_log) -> None:
         """Copy the traffic into ``bench.log.sharing``; publish the last segment at the end."""
-        if lap_log.lap == bench.log.spec.laps and self._segment is not None:
-            self._publish(bench, bench.sim_time)
+        if lap_log.lap == vehicle.log.spec.laps and self._segment is not None:
+            self._publish(vehicle, vehicle.sim_time)
             self._segment = None
         traffic = self.store.traffic_arrays()
-        bench.log.sharing = {
+        vehicle.log.sharing = {
             **self.store.totals(),
             "stamp": traffic["stamp"].tolist(),
             "message_bytes": traffic["bytes"].tolist(),
             "message_grid_bytes": traffic["grid_bytes"].tolist(),
         }
 
-    def _publish(self, bench, stamp: float) -> None:
-        names = self.segment_names or [segment.name for segment in bench.segments]
+    def _publish(self, vehicle: VehicleView, stamp: float) -> None:
+        names = self.segment_names or [segment.name for segment in vehicle.segments]
         index = names.index(self._segment)
-        self.store.publish(index, self.sender, bench.local_maps[self._segment], stamp=stamp,
+        self.store.publish(index, self.sender, vehicle.local_maps[self._segment], stamp=stamp,
                            since=self._entered)

@@ -1,29 +1,30 @@
 """The closed loop as an object: PyBullet physics, the UGV's stack and the polyline mapper.
 
-One physics tick (DESIGN.md "The closed loop"); observers are called at the marked points::
+One physics tick (docs/design.md, the closed loop); observers are called where marked::
 
     people walk ------------------------------------------------------------------------
     wheel encoders -> odometry increment --------------------------------> EKF predict
     top laser scan -> reflective posts -> landmarks ----------------------> EKF update
     safety laser scan -+-> field policy -> warning/protective fields -> speed scale
                        +-> polyline mapper (EKF pose) -> local map of the current segment
-                       +-> on_scan(bench, record)
+                       +-> on_scan(vehicle, record)
     EKF pose + spline path -> chained-form follower (u1, u2) * speed scale -> wheel motors
-    physics step, contacts -> on_tick(bench)
-    lap over? -> on_lap_end(bench, lap_log); next lap's boxes; re-localise -> on_lap_start
+    physics step, contacts -> on_tick(vehicle)
+    lap over? -> on_lap_end(vehicle, lap_log); next lap's boxes; re-localise -> on_lap_start
 
-Sensors and control run at their own rates, scheduled on the physics clock. Each lap
-starts with the robot put back at the path start (it re-localises by triangulation) and
-the semi-static boxes changed as the scenario says, "while the robot is not observing".
-The tick does what the robot does; the simulator's ground truth is only read by
-observers (scoring, the paper's Table 1 experiment, recording, progress).
+Sensors and control run at their own rates on the physics clock. Each lap starts with the
+robot carried back to the start (it re-localises) and the boxes changed as the scenario
+says, "while the robot is not observing". The tick does what the robot does; ground
+truth is read only by observers (scoring, Table 1, recording, progress).
 
 A scenario with ``[[vehicles]]`` drives a fleet in one world: each vehicle
-(:class:`~scenarios.bench.vehicle.Vehicle`, in ``bench.vehicles`` by name) runs the tick above
-with its own stack and laps, scored by observers of its own; the bench's observers and
-its single-robot properties (``true_pose``, ``local_maps``, ``lap`` ...) follow the
-first vehicle. A lap's box moves happen when the first vehicle starts it; a vehicle that
-drove its laps leaves the hall (:data:`PARKING`) and the run ends when all have.
+(:class:`~scenarios.bench.vehicle.Vehicle`, ``bench.vehicles`` by name) runs the tick above
+with its own stack, laps and scoring observers, and all share the bench's
+:class:`~scenarios.bench.scene.Scene`. The bench is the
+:class:`~scenarios.bench.observer.VehicleView` of its first vehicle, whose lap starts bring
+the box moves; a vehicle done with its laps parks outside (:mod:`scenarios.bench.fleet`).
+numba compiles the mapper's kernels on first use; :func:`semistatic.kernel_cache.
+warm_kernel_cache` compiles them ahead on every core (the CLI does; ``reset`` does not).
 
 Examples
 --------
@@ -41,36 +42,38 @@ import dataclasses
 import time
 from collections.abc import Mapping
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 
 from robots.presets import UGVSpec
-from scenarios.bench.observers import GroundTruthScoring, GuiView, Table1Reference, hook_table
+from scenarios.bench.clock import SensorClock
+from scenarios.bench.fleet import PARKING
+from scenarios.bench.gui import GuiView
+from scenarios.bench.observer import Observer, require_observer
 from scenarios.bench.policies import FieldPolicy
-from scenarios.bench.records import LapLog, RunLog, Schedule, combine_logs
+from scenarios.bench.records import LapLog, RunLog, combine_logs
+from scenarios.bench.scene import Scene
+from scenarios.bench.scoring import GroundTruthScoring, Table1Reference
 from scenarios.bench.sharing import SegmentPublisher
-from scenarios.bench.vehicle import RELOCALIZE_ATTEMPTS, SETTLE_STEPS, ZONES, Vehicle
+from scenarios.bench.vehicle import Vehicle
 from scenarios.spec.layout import lap_worlds, robot_preset
 from scenarios.spec.load import load_scenario
 from scenarios.spec.routes import fleet_vehicles, vehicle_route
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments
 from semistatic.fleet import FleetMapStore
-from semistatic.kernel_cache import warm_kernel_cache
-from semistatic.local_map import LocalMap
 from sim.client import SimClient
-from sim.people import People
 from sim.random_streams import RandomStreams
 from sim.world_builder import SimWorld
 from worlds.checks import build_spline
 from worlds.spec import BoxSpec, WorldSpec
 
-__all__ = ["PARKING", "RELOCALIZE_ATTEMPTS", "SETTLE_STEPS", "ZONES", "Testbench"]
+__all__ = ["Testbench"]
 
-PARKING = (-5.0, -5.0, 0.0)
-"""Where a fleet vehicle that drove its laps leaves the hall (outside the walls, the
-next one 3 m further west): it must not block the route of the others."""
+
+def _of_lead(name: str, doc: str) -> property:
+    """Return a read-only property reading ``name`` of the bench's first vehicle."""
+    return property(lambda bench: getattr(bench.fleet[0], name), doc=doc)
 
 
 class Testbench:
@@ -92,14 +95,15 @@ class Testbench:
         Open PyBullet's window (the camera follows the robot; fields, laser returns and
         local maps are drawn).
 
+    Notes
+    -----
     Life cycle: :meth:`reset` builds the simulation and starts lap 1; :meth:`step`
     advances one physics tick; :meth:`run_lap` and :meth:`run` advance to the end of the
     lap or of the run; :meth:`close` (or leaving a ``with`` block) frees PyBullet. Between
-    laps the robot is carried back to the start and the scenario's box moves for the next
-    lap are applied; :meth:`move_box`, :meth:`add_box` and :meth:`remove_box` change the
-    boxes at any moment (until the scenario's next lap layout replaces them).
-
-    Observers (:mod:`scenarios.bench.observers`) added before :meth:`reset` see lap 1 start.
+    laps the robot is carried back to the start and the next lap's box moves applied;
+    :meth:`move_box`, :meth:`add_box` and :meth:`remove_box` change the boxes at any
+    moment. Observers added before :meth:`reset` see lap 1 start; the bench hands them
+    itself (:class:`~scenarios.bench.observer.Observer`).
 
     Examples
     --------
@@ -124,38 +128,40 @@ class Testbench:
         spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
         if policy is not None:
             spec = dataclasses.replace(spec, policy=policy)
-        self.spec = spec
+        self._spec = spec
         self.gui = bool(gui)
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
         self.fleet_size = len(fleet_vehicles(spec))
-        # One vehicle reports to the bench's observers; a fleet scores each vehicle with
-        # observers of its own (Vehicle.observers) and the bench's follow the first one.
-        self.observers: list = []
-        if self.fleet_size == 1:
-            self.observers += [GroundTruthScoring(), Table1Reference()]
-            if spec.sharing:
-                self.observers.append(SegmentPublisher())
-        if self.gui:
-            self.observers.append(GuiView())
+        # The bench's observers follow its first vehicle and receive the bench; each
+        # vehicle's scoring observers are its own (attached at reset).
+        self.observers: list[Observer] = [GuiView()] if self.gui else []
         self.log: RunLog | None = None
+        self.scene: Scene | None = None
         self._sim: SimClient | None = None
-        self._hooks: dict | None = None
         self.done = False
 
     # ------------------------------------------------------------------ life cycle
-    def add_observer(self, observer) -> None:
-        """Call ``observer``'s ``on_tick``, ``on_scan``, ``on_lap_start``, ``on_lap_end`` hooks.
+    def add_observer(self, observer: Observer) -> None:
+        """Call ``observer``'s hooks with this bench (its first vehicle's view) from now on.
+
+        Added before :meth:`reset`, it sees lap 1 start; a reset keeps it.
 
         Examples
         --------
         >>> bench = Testbench("pal1")
-        >>> bench.add_observer(object())   # no hooks: never called
+        >>> bench.add_observer(Observer())   # overrides nothing: never called
         >>> len(bench.observers)
-        3
+        1
+        >>> bench.add_observer(object())  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        TypeError: observer <object ...> is no scenarios.Observer: subclass it and override \
+the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         """
-        self.observers.append(observer)
-        self._hooks = None
+        self.observers.append(require_observer(observer))
+        if self.scene is not None:
+            self.fleet[0].add_observer(observer, view=self)
 
     def reset(self, *, seed: int | None = None) -> None:
         """Build the simulation and start lap 1: robot at the start, re-localised.
@@ -171,78 +177,42 @@ class Testbench:
         (1, 4, True)
         """
         self.close()
-        # numba's one-time set-up, and the kernels missing from its cache (the first run
-        # after installation or an upgrade) compiled on every core at once: start-up like
-        # an import, not the run's time.
-        warm_kernel_cache()
         self._wall_start = time.perf_counter()
-        spec = self.spec if seed is None else dataclasses.replace(self.spec, seed=seed)
-        self.log_spec = spec
+        spec = self._spec if seed is None else dataclasses.replace(self._spec, seed=seed)
         self._worlds = lap_worlds(spec, world=self._world_override)
         base_world = self._worlds[0]
-        path = build_spline(base_world.path)
-        self.segments: tuple[PathSegment, ...] = path_segments(base_world, path)
-        self._segment_keys = {segment.name: segment.index for segment in self.segments}
-        self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec,
-                          segments=self.segments)
-        self.streams = RandomStreams(spec.seed)
+        segments = path_segments(base_world, build_spline(base_world.path))
+        self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec, segments=segments)
         rates = spec.rates
         self._sim = sim = SimClient(gui=self.gui, time_step=1.0 / rates.physics_hz)
-        self.world = SimWorld(sim, base_world)
-        self.store = FleetMapStore() if spec.sharing and self.fleet_size > 1 else None
-        self.fleet: list[Vehicle] = []
+        store = FleetMapStore() if spec.sharing and self.fleet_size > 1 else None
+        self.scene = scene = Scene(spec, sim, SimWorld(sim, base_world), segments,
+                                   RandomStreams(spec.seed), store)
         for index, vehicle in enumerate(fleet_vehicles(spec)):
             robot = self._robot_spec if index == 0 and not spec.vehicles else \
                 robot_preset(vehicle.robot, file=spec.source)
-            self.fleet.append(Vehicle(self, index, vehicle.name, robot,
-                                      vehicle_route(base_world, vehicle),
-                                      store=self.store, start_time=vehicle.start_time))
+            scene.fleet.append(Vehicle(scene, index, vehicle.name, robot,
+                                       vehicle_route(base_world, vehicle),
+                                       store=store, start_time=vehicle.start_time))
+        self.fleet: list[Vehicle] = scene.fleet
         self.vehicles: Mapping[str, Vehicle] = MappingProxyType(
             {vehicle.name: vehicle for vehicle in self.fleet})
         if self.fleet_size == 1:
             self.fleet[0].log = self.log  # the run's log is the vehicle's
-        else:
-            self._attach_fleet_observers(spec)
-        # A world without people costs no per-tick call (person_positions stays empty).
-        self._people = People(self.world) if self.world.people else None
-        # Control, localization and safety, in the order vehicles take them; each one's
-        # next step is looked up once per firing, and a tick before the earliest does
-        # no sensing or control at all.
-        self._schedules = (Schedule(rates.control_hz, rates.physics_hz),
-                           Schedule(rates.localization_hz, rates.physics_hz),
-                           Schedule(rates.safety_hz, rates.physics_hz))
-        self._due_steps = [schedule.next_due(0) for schedule in self._schedules]
-        self._next_due = min(self._due_steps)
-        self._step_count = 0
-        self.person_positions: dict[str, np.ndarray | None] = {}
-        self.layout_revision = 0
-        self.done = False
-        self._hooks = None
-        self._apply_layout(self._worlds[0])
-        for vehicle in self.fleet:
-            vehicle.begin_lap(1)
-
-    def _attach_fleet_observers(self, spec: ScenarioSpec) -> None:
-        """Give every vehicle of a fleet its own scoring (and publishing) observers."""
-        names = [segment.name for segment in self.segments]
+        names = [segment.name for segment in segments]
         for vehicle in self.fleet:
             vehicle.add_observer(GroundTruthScoring())
             vehicle.add_observer(Table1Reference())
-            if self.store is not None:
-                vehicle.add_observer(
-                    SegmentPublisher(self.store, vehicle.index, segment_names=names))
-
-    def segment_key(self, name: str) -> int:
-        """Return the fleet-wide index of segment ``name`` (its place in the world's path).
-
-        Examples
-        --------
-        >>> with Testbench("pal1") as bench:
-        ...     bench.reset()
-        ...     [bench.segment_key(segment.name) for segment in bench.segments]
-        [0, 1, 2]
-        """
-        return self._segment_keys[name]
+            if spec.sharing:  # alone, a vehicle publishes to a store of its own
+                vehicle.add_observer(SegmentPublisher(store, vehicle.index, segment_names=names))
+        for observer in self.observers:
+            self.fleet[0].add_observer(observer, view=self)
+        scene.add_people()
+        self._clock = SensorClock(rates)
+        self.done = False
+        scene.apply_layout(self._worlds[0])
+        for vehicle in self.fleet:
+            vehicle.begin_lap(1)
 
     def close(self) -> None:
         """Disconnect from PyBullet (the log stays readable); safe to call twice.
@@ -283,33 +253,20 @@ class Testbench:
         """
         if self._sim is None or self.done:
             self._require_running()  # raises
-        if self._people is not None:
-            self._walk_people()
+        self.scene.walk_people(self.fleet[0].lap_log.start_time)
         self._sense_and_command()
         self._sim.step()
         self._after_physics()
 
     # The tick in named pieces (physics stepping and per-tick glue stay easy to find).
-    def _walk_people(self) -> None:
-        lead = self.fleet[0]
-        self.person_positions = self._people.update(self._sim.sim_time,
-                                                    lap_start=lead.lap_log.start_time)
-
     def _sense_and_command(self) -> None:
-        self._step_count += 1
-        n = self._step_count
-        if n < self._next_due:
+        due = self._clock.tick()
+        if due is None:
             # Nothing due: only a vehicle waiting for its start time looks at the clock.
             for vehicle in self.fleet:
                 if vehicle.waiting:
                     vehicle.sense_and_command(False, False, False)
             return
-        steps = self._due_steps
-        due = (steps[0] == n, steps[1] == n, steps[2] == n)
-        for index, schedule in enumerate(self._schedules):
-            if due[index]:
-                steps[index] = schedule.next_due(n)
-        self._next_due = min(steps)
         for vehicle in self.fleet:
             vehicle.sense_and_command(*due)
 
@@ -317,10 +274,8 @@ class Testbench:
         for vehicle in self.fleet:
             if not vehicle.done:
                 vehicle.contacts.check()
-        for hook in self.observer_hooks("on_tick"):
-            hook(self)
         for vehicle in self.fleet:
-            vehicle.tick_observers()
+            vehicle.observers.emit("on_tick")
         for vehicle in self.fleet:
             if vehicle.lap_over():
                 self._end_lap(vehicle)
@@ -358,21 +313,33 @@ class Testbench:
             self.step()
         return self.log
 
-    # ------------------------------------------------------------------ state
-    @property
-    def lead(self) -> Vehicle:
-        """Return the first vehicle: the one ``true_pose``, ``local_maps`` ... describe."""
-        return self.fleet[0]
+    # ------------------------------------------------------------------ the view
+    # The bench is the VehicleView of its first vehicle (scenarios.bench.observer).
+    name = _of_lead("name", "The first vehicle's name.")
+    segment = _of_lead("segment", "The path segment the first vehicle is on.")
+    lap_log = _of_lead("lap_log", "The first vehicle's current lap log.")
+    true_pose = _of_lead("true_pose", "The first vehicle's true pose (x, y, theta); for scoring.")
+    true_twist = _of_lead("true_twist", "The first vehicle's true (v_forward, v_left, omega).")
+    ekf_pose = _of_lead("ekf_pose", "The first vehicle's EKF pose estimate (x, y, theta).")
+    ekf_covariance = _of_lead("ekf_covariance", "The first vehicle's (3, 3) EKF covariance.")
+    local_maps = _of_lead("local_maps", "The first vehicle's local map of every segment.")
+    zone = _of_lead("zone", "The first vehicle's safety zone: free, warning or protective.")
+    speed_scale = _of_lead("speed_scale", "The first vehicle's speed factor (1 free, 0 stop).")
+    policy = _of_lead("policy", "The first vehicle's field policy (each vehicle has its own).")
+    lap = _of_lead("lap", "The current lap, from 1 (the last lap once the run is done).")
+    world = _of_lead("world", "The simulated world (boxes as they stand now).")
+    person_positions = _of_lead("person_positions", "Where the people stand now (or None).")
+    layout_revision = _of_lead("layout_revision", "Changes whenever a box moves.")
 
     @property
-    def lap_log(self) -> LapLog:
-        """Return the first vehicle's current lap log."""
-        return self.fleet[0].lap_log
+    def spec(self) -> ScenarioSpec:
+        """Return the scenario: of the run once reset (its seed applied), else as given."""
+        return self._spec if self.log is None else self.log.spec
 
     @property
-    def lap(self) -> int:
-        """Return the current lap, counted from 1 (the last lap once the run is done)."""
-        return self.lap_log.lap
+    def segments(self) -> tuple[PathSegment, ...]:
+        """Return the world path's segments."""
+        return self.log.segments
 
     @property
     def time_step(self) -> float:
@@ -386,63 +353,9 @@ class Testbench:
         """Return the simulated seconds since the run started."""
         return self._sim.sim_time if self._sim is not None else self.log.sim_time_s
 
-    @property
-    def true_pose(self) -> np.ndarray:
-        """Return the simulator's true robot pose ``(x, y, theta)`` (for scoring only).
-
-        With several vehicles, the first one's; ``bench.vehicles[name].true_pose`` is any
-        vehicle's.
-
-        Examples
-        --------
-        >>> with Testbench("warehouse_fleet") as bench:
-        ...     bench.reset()
-        ...     names = [name for name in bench.vehicles]
-        ...     same = bool((bench.true_pose == bench.vehicles["lgv1"].true_pose).all())
-        ...     names, bench.vehicles["lgv2"].segment.name, same
-        (['lgv1', 'lgv2', 'lgv3'], 'north_west', True)
-        """
-        return self.fleet[0].true_pose
-
-    @property
-    def true_twist(self) -> np.ndarray:
-        """Return the simulator's true ``(v_forward, v_left, omega)`` of the robot (m/s, rad/s)."""
-        return self.fleet[0].true_twist
-
-    @property
-    def ekf_pose(self) -> np.ndarray:
-        """Return the EKF's robot pose estimate ``(x, y, theta)``, world frame."""
-        return self.fleet[0].ekf_pose
-
-    @property
-    def ekf_covariance(self) -> np.ndarray:
-        """Return the EKF's ``(3, 3)`` pose covariance."""
-        return self.fleet[0].ekf_covariance
-
-    @property
-    def local_maps(self) -> Mapping[str, LocalMap]:
-        """Return the local map of every path segment by segment name (read-only mapping)."""
-        return self.fleet[0].local_maps
-
-    @property
-    def zone(self) -> str:
-        """Return the safety zone after the last safety scan: free, warning or protective."""
-        return self.fleet[0].zone
-
-    @property
-    def speed_scale(self) -> float:
-        """Return the speed factor the safety fields impose (1 free, 0 stopped)."""
-        return self.fleet[0].speed_scale
-
-    @property
-    def policy(self) -> FieldPolicy:
-        """Return the first vehicle's field policy (each vehicle has its own)."""
-        return self.fleet[0].policy
-
-    @property
-    def segment(self) -> PathSegment:
-        """Return the path segment the robot is on (by the follower's progress)."""
-        return self.fleet[0].segment
+    def vehicle_outlines(self) -> list[np.ndarray]:
+        """Return the true footprints of the fleet's vehicles (for scoring)."""
+        return self.fleet[0].vehicle_outlines()
 
     @property
     def sim(self) -> SimClient:
@@ -467,7 +380,7 @@ class Testbench:
         """
         if self.log is None:
             raise RuntimeError("Testbench: call reset() first (the streams come from its seed)")
-        return self.streams.generator(name)
+        return self.scene.streams.generator(name)
 
     # ------------------------------------------------------------------ boxes
     def move_box(self, name: str, pose: tuple[float, float, float]) -> None:
@@ -489,20 +402,17 @@ class Testbench:
 ('crate', (6.0, 0.9, 0.0))]
         """
         self._require_running()
-        self.world.move_box(name, tuple(float(value) for value in pose))
-        self.layout_revision += 1
+        self.scene.move_box(name, pose)
 
     def add_box(self, box: BoxSpec) -> None:
         """Put a new semi-static box into the world now."""
         self._require_running()
-        self.world.add_box(box)
-        self.layout_revision += 1
+        self.scene.add_box(box)
 
     def remove_box(self, name: str) -> None:
         """Take semi-static box ``name`` out of the world now."""
         self._require_running()
-        self.world.remove_box(name)
-        self.layout_revision += 1
+        self.scene.remove_box(name)
 
     # ------------------------------------------------------------------ pieces
     def _require_running(self) -> None:
@@ -511,37 +421,12 @@ class Testbench:
         if self.done:
             raise RuntimeError("Testbench: every lap has run; call reset() to start over")
 
-    def observer_hooks(self, name: str) -> Any:
-        """Return the bench observers' ``name`` hooks, or ``"wants_polylines"``; cached."""
-        if self._hooks is None:
-            self._hooks = hook_table(self.observers)
-        return self._hooks[name]
-
-    def _apply_layout(self, layout: WorldSpec) -> None:
-        """Make the simulated boxes match ``layout`` (move, add, remove by name)."""
-        world = self.world
-        wanted = {box.name: box for box in layout.boxes}
-        current = {box.name: box for box in world.boxes}
-        changed = False
-        for name in current.keys() - wanted.keys():
-            world.remove_box(name)
-            changed = True
-        for name, box in wanted.items():
-            if name not in current:
-                world.add_box(box)
-                changed = True
-            elif tuple(current[name].pose) != tuple(box.pose):
-                world.move_box(name, box.pose)
-                changed = True
-        if changed:
-            self.layout_revision += 1
-
     def _end_lap(self, vehicle: Vehicle) -> None:
         """Close ``vehicle``'s lap; set up its next one (the first vehicle's brings the boxes)."""
         if vehicle.end_lap():
             lap = vehicle.lap_log.lap + 1
             if vehicle.index == 0:
-                self._apply_layout(self._worlds[lap - 1])
+                self.scene.apply_layout(self._worlds[lap - 1])
             vehicle.begin_lap(lap)
             return
         if self.fleet_size > 1:
@@ -559,6 +444,7 @@ class Testbench:
             vehicle.log.sim_time_s = sim.sim_time
             vehicle.log.wall_time_s = wall
         if self.fleet_size > 1:
-            combine_logs(log, {vehicle.name: vehicle.log for vehicle in self.fleet}, self.store)
+            combine_logs(log, {vehicle.name: vehicle.log for vehicle in self.fleet},
+                         self.scene.store)
             log.engine_time_s, log.sim_time_s = sim.engine_time_s, sim.sim_time
             log.wall_time_s = wall

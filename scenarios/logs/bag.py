@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import Literal
 
 from robots.presets import UGVSpec
-from scenarios.bench.runner import ScanRecord
+from scenarios.bench.records import ScanRecord
 from scenarios.process.staging import check_writable_parent
 from semistatic.logs.rosbag import (
     EKF_TOPIC,

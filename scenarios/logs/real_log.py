@@ -35,7 +35,7 @@ Examples
 >>> wall = 2.0 / np.cos(angles)  # a wall 2 m ahead, seen from the origin
 >>> scan = Scan(ranges=np.where(np.abs(angles) < 1.2, wall, np.inf), angle_min=angles[0],
 ...             angle_increment=np.radians(1.0), range_max=20.0)
->>> result = replay([scan, scan], ReplayOptions(revisit_gap=0.0))
+>>> result = replay_log([scan, scan], ReplayOptions(revisit_gap=0.0))
 >>> result.scans, len(result.tiles)
 (2, 1)
 """
@@ -80,7 +80,7 @@ __all__ = [
     "estimate_range_noise",
     "noise_params",
     "open_log",
-    "replay",
+    "replay_log",
     "write_replay_outputs",
 ]
 
@@ -325,7 +325,7 @@ def _tile_key(position: np.ndarray, size: float) -> tuple[int, int]:
     return (math.floor(position[0] / size), math.floor(position[1] / size))
 
 
-def replay(
+def replay_log(
     scans: Iterable[Scan],
     options: ReplayOptions | None = None,
     *,

@@ -1,4 +1,4 @@
-"""Turn a run log into the output directory of DESIGN.md (a contract, extend only).
+"""Turn a run log into the output directory of docs/design.md (a contract, extend only).
 
 ::
 
@@ -23,6 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.bench.ground_truth import detection_scores
+from scenarios.bench.policies import policy_name
+from scenarios.bench.records import LapLog, RunLog
+from scenarios.process.staging import stage_and_publish
 from scenarios.results.figures import (
     plot_detection_scores,
     plot_ekf_corrections,
@@ -31,16 +35,7 @@ from scenarios.results.figures import (
     plot_sharing_traffic,
     plot_tangent_histograms,
 )
-from scenarios.results.metrics import (
-    detection_scores,
-    ekf_correction_metrics,
-    localization_metrics,
-    table1_cm,
-)
-from scenarios.process.staging import stage_and_publish
-from scenarios.bench.policies import policy_name
-from scenarios.bench.records import LapLog
-from scenarios.bench.runner import RunLog
+from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
 
 __all__ = [
     "PAPER_TABLE1",
@@ -104,7 +99,7 @@ def detection_metrics(laps: Sequence[LapLog]) -> dict[str, Any]:
 
 
 def summarize(log: RunLog) -> dict[str, Any]:
-    """Return the ``metrics.json`` content of a run (DESIGN.md keys, and more)."""
+    """Return the ``metrics.json`` content of a run (docs/design.md keys, and more)."""
     spec = log.spec
     laps = log.laps
     localization = localization_metrics(log.true_poses, log.estimated_poses, log.covariances)

@@ -117,7 +117,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def write_table(results: Mapping[str, Mapping[str, Any]], out: str | os.PathLike[str]) -> None:
-    """Write ``table1.csv`` (ours, the DESIGN.md columns) and ``table1.md`` (side by side)."""
+    """Write ``table1.csv`` (ours, the design page's columns) and ``table1.md`` (side by side)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     csv_lines = [",".join(TABLE1_COLUMNS)]

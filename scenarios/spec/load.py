@@ -49,6 +49,7 @@ __all__ = [
     "paper_scenarios",
     "parse_override",
     "scenario_from_toml",
+    "scenario_help",
     "scenario_path",
 ]
 
@@ -80,6 +81,17 @@ def bundled_scenarios() -> tuple[str, ...]:
 
 PAPER_SCENARIOS = ("pal1", "pal3a", "pal3b", "sim1", "sim2")
 """The bundled scenarios that are rows of the paper's Table 1 (``semistatic table``)."""
+
+
+def scenario_help() -> str:
+    """Return the help of a SCENARIO argument, naming the bundled scenarios (one registry).
+
+    Examples
+    --------
+    >>> scenario_help()
+    'bundled name (pal1, pal3a, pal3b, sim1, sim2, warehouse, warehouse_fleet) or a .toml'
+    """
+    return f"bundled name ({', '.join(bundled_scenarios())}) or a .toml"
 
 
 def paper_scenarios() -> tuple[str, ...]:

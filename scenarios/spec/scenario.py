@@ -47,9 +47,10 @@ BOX_ACTIONS = ("move", "add", "remove")
 class Rates:
     """Update rates in Hz. Physics steps at ``physics_hz``; everything else is scheduled on it.
 
-    The defaults follow DESIGN.md: 240 Hz physics, 50 Hz control, a 25 Hz localization laser
-    (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300, 80 ms scan time). With the
-    ``pioneer3dx`` preset one LMS100 serves both roles; each role then uses its own rate.
+    The defaults follow the design page (docs/design.md): 240 Hz physics, 50 Hz control, a
+    25 Hz localization laser (LMS100 runs at 25 or 50 Hz) and a 12.5 Hz safety laser (S300,
+    80 ms scan time). With the ``pioneer3dx`` preset one LMS100 serves both roles; each role
+    then uses its own rate.
 
     Parameters
     ----------

@@ -2,8 +2,9 @@
 
 Each path segment of a world has its own safety fields (switched as the robot enters it,
 as on a real Sick scanner) and its own local map, stored in a frame anchored at the
-segment start (paper Sec. 3, DESIGN.md detail 9). The local map keeps only polylines that
-meet the segment's *safety area*: the union of the warning field swept along the segment.
+segment start (paper Sec. 3, docs/design.md#detail-9). The local map keeps only polylines
+that meet the segment's *safety area*: the union of the warning field swept along the
+segment.
 
 Examples
 --------

@@ -1,4 +1,4 @@
-"""The figure of a threshold sweep (:mod:`scenarios.tuning.command`), drawn from its summary.
+"""The figure of a threshold sweep (:mod:`scenarios.commands.tune`), drawn from its summary.
 
 One grid key: each metric against the value (the best value marked, single-seed dots
 when there are several seeds); two keys: heatmaps of Table 1, F1 and lap time with the
@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.tuning.metrics import METRICS, NEES_TARGET
-from scenarios.tuning.points import display_value, toml_value
-from scenarios.tuning.table import settings_text
+from scenarios.tuning.points import display_value, settings_text, toml_value
 
 __all__ = ["plot_sweep"]
 

@@ -39,6 +39,7 @@ __all__ = [
     "parse_grid",
     "parse_grids",
     "parse_seeds",
+    "settings_text",
     "sweep_points",
     "toml_value",
 ]
@@ -362,3 +363,12 @@ def sweep_points(
     return points
 
 
+def settings_text(settings: Mapping[str, Any]) -> str:
+    """Return ``key=value ...`` of a point's settings, as on the command line.
+
+    Examples
+    --------
+    >>> settings_text({"mapper.gate": 0.1, "policy": "adaptive"})
+    'mapper.gate=0.1 policy=adaptive'
+    """
+    return " ".join(f"{key}={display_value(value)}" for key, value in settings.items())

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from scenarios.logs.recording import Recording, read_recording, replay
+from scenarios.logs.recording import Recording, read_recording
+from scenarios.logs.recording_replay import replay_recording, replay_setting
 from scenarios.process.workers import worker_pool
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
@@ -125,7 +126,7 @@ class RecordingSet:
         same = [r for r in recordings if r.manifest["scenario"] == spec.name]
         for recording in same:
             if recording.manifest["seed"] == spec.seed:
-                recording.check_matches(spec)
+                replay_setting(recording, spec)  # checked, and decoded once for every point
                 return recording
         if same:
             seeds = sorted(r.manifest["seed"] for r in same)
@@ -147,7 +148,7 @@ def run_point(spec: ScenarioSpec, recordings: RecordingSet | None = None) -> Out
     """
     try:
         if recordings is not None and recordings.paths:
-            return replay(recordings.for_spec(spec), spec), None
+            return replay_recording(recordings.for_spec(spec), spec), None
         from scenarios.bench.runner import run_scenario
         from scenarios.results.outputs import summarize
 

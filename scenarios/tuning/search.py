@@ -202,7 +202,7 @@ class SearchConfig:
         """Return the per-objective mean, worst case and spread over a trial's runs' metrics.
 
         The runs are every scenario with every seed. The optimised value is the mean (for
-        NEES: the mean distance to :data:`~scenarios.tuning.command.NEES_TARGET`). ``None`` values
+        NEES: the mean distance to :data:`~scenarios.tuning.metrics.NEES_TARGET`). ``None`` values
         when a run lacks one.
 
         Examples

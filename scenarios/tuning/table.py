@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, TIMING_COLUMNS, metric_value
-from scenarios.tuning.points import display_value, toml_value
+from scenarios.tuning.points import display_value, settings_text, toml_value
 from scenarios.tuning.run import PointResult
 from semistatic.validation import did_you_mean
 
@@ -21,7 +21,6 @@ __all__ = [
     "combine_seeds",
     "format_ranking",
     "rank",
-    "settings_text",
     "sweep_row",
     "write_sweep",
 ]
@@ -228,17 +227,6 @@ def write_sweep(
 
     stage_and_publish(Path(out), fill)
     return summary
-
-
-def settings_text(settings: Mapping[str, Any]) -> str:
-    """Return ``key=value ...`` of a point's settings, as on the command line.
-
-    Examples
-    --------
-    >>> settings_text({"mapper.gate": 0.1, "policy": "adaptive"})
-    'mapper.gate=0.1 policy=adaptive'
-    """
-    return " ".join(f"{key}={display_value(value)}" for key, value in settings.items())
 
 
 def _display_cell(value: Any) -> Any:

@@ -24,9 +24,9 @@ import numpy as np
 from matplotlib.image import imsave
 
 from scenarios import Testbench, load_scenario
-from scenarios.bench.observers import GuiView
+from scenarios.bench.gui import GuiView
 
-# Drawing colours as 8-bit RGB, as the GUI renders them (scenarios.bench.observers).
+# Drawing colours as 8-bit RGB, as the GUI renders them (scenarios.bench.gui).
 COLOURS = {"warning": (255, 153, 0), "protective": (229, 0, 0), "returns": (191, 0, 191),
            "confirmed": (0, 165, 0)}
 

@@ -7,7 +7,8 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from scenarios.bench.runner import run_scenario
-from scenarios.cli import BAG_STORAGE_CHOICES, main
+from scenarios.cli import main
+from scenarios.commands.run import BAG_STORAGE_CHOICES
 from scenarios.logs.bag import (
     BAG_STORAGES,
     BAG_TOPICS,

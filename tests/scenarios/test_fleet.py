@@ -178,5 +178,5 @@ def test_a_vehicle_drives_its_sub_route_and_waits_for_its_start_time():
     assert max(loop.distance(shapely.Point(xy)) for xy in poses[:, :2]) < 0.15
     # Its segment maps are in the fleet's frames (a test above compares a rotated loop).
     assert [s.name for s in lgv1.segments] == ["turn_southwest", "south_start"]
-    assert all(s.origin is bench.segments[bench.segment_key(s.name)].origin
+    assert all(s.origin is bench.segments[bench.scene.segment_key(s.name)].origin
                for s in lgv1.segments)

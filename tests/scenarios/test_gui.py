@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from scenarios import Testbench
-from scenarios.bench.observers import GuiView
+from scenarios.bench.gui import GuiView
 from tests.scenarios.tiny_world import write_tiny
 
 ROOT = Path(__file__).resolve().parents[2]

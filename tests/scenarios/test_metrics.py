@@ -6,15 +6,13 @@ import numpy as np
 import pytest
 import shapely
 
-from scenarios.results.metrics import (
+from scenarios.bench.ground_truth import (
     clip_to_area,
     detection_scores,
-    ekf_correction_metrics,
-    localization_metrics,
     match_polylines_to_boxes,
     score_lap,
-    table1_cm,
 )
+from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
 from semistatic.polyline import Polyline
 
 BOX = np.array([[1.0, -1.0], [2.0, -1.0], [2.0, -0.5], [1.0, -0.5]])

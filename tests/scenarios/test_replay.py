@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from scenarios.cli import main
-from scenarios.logs.real_log import ReplayOptions, replay
+from scenarios.logs.real_log import ReplayOptions, replay_log
 from semistatic.alignment import AlignmentParams
 from semistatic.types import Scan
 from tests.semistatic.synthetic import box, raycast, scene, wall
@@ -65,8 +65,8 @@ def synthetic_log(offset=OFFSET, *, seed=0, noise=0.005):
 @pytest.fixture(scope="module")
 def aligned_and_raw():
     scans = synthetic_log()
-    aligned = replay(scans, OPTIONS)
-    raw = replay(scans, dataclasses.replace(OPTIONS, align=False))
+    aligned = replay_log(scans, OPTIONS)
+    raw = replay_log(scans, dataclasses.replace(OPTIONS, align=False))
     return aligned.summary(), raw.summary()
 
 
@@ -106,7 +106,7 @@ def test_alignment_leaves_extraction_and_maps_alone(aligned_and_raw):
 def test_consistent_log_is_not_made_to_look_better():
     # Logged poses already right: the corrections are small (the reference is a 3 cm
     # Douglas-Peucker polyline map, not the truth) and Table 1 does not shrink.
-    summary = replay(synthetic_log(offset=(0.0, 0.0, 0.0), seed=1), OPTIONS).summary()
+    summary = replay_log(synthetic_log(offset=(0.0, 0.0, 0.0), seed=1), OPTIONS).summary()
     alignment = summary["alignment"]
     assert alignment["translation_cm"]["median"] < 1.0
     assert alignment["rotation_deg"]["median"] < 0.1
@@ -117,7 +117,7 @@ def test_consistent_log_is_not_made_to_look_better():
 
 def test_rejected_alignments_keep_the_logged_pose():
     options = dataclasses.replace(OPTIONS, alignment=AlignmentParams(min_points=100_000))
-    summary = replay(synthetic_log(seed=2), options).summary()
+    summary = replay_log(synthetic_log(seed=2), options).summary()
     alignment = summary["alignment"]
     assert alignment["accepted"] == 0
     assert alignment["rejected"] == {"too few points": alignment["attempted"]}
@@ -127,14 +127,14 @@ def test_rejected_alignments_keep_the_logged_pose():
 
 def test_corrections_beyond_the_bound_are_refused():
     options = dataclasses.replace(OPTIONS, alignment=AlignmentParams(max_translation=0.03))
-    alignment = replay(synthetic_log(seed=2), options).summary()["alignment"]
+    alignment = replay_log(synthetic_log(seed=2), options).summary()["alignment"]
     refused = alignment["rejected"].get("translation beyond max_translation", 0)
     assert refused >= 0.8 * alignment["attempted"]  # the offset is 5.8 cm
 
 
 def test_same_log_same_summary():
     scans = synthetic_log(seed=3)
-    first, second = replay(scans, OPTIONS).summary(), replay(scans, OPTIONS).summary()
+    first, second = replay_log(scans, OPTIONS).summary(), replay_log(scans, OPTIONS).summary()
     first.pop("performance")
     second.pop("performance")
     assert first == second

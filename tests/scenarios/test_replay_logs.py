@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios.logs.real_log import ReplayOptions, open_log, replay
+from scenarios.logs.real_log import ReplayOptions, open_log, replay_log
 
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
@@ -23,7 +23,7 @@ pytestmark = [
 @pytest.fixture(scope="module", params=["intel", "aces"])
 def summary(request):
     scans = open_log(DATA / f"{request.param}-corrected.log.gz")
-    return request.param, replay(scans, ReplayOptions(align=True)).summary()
+    return request.param, replay_log(scans, ReplayOptions(align=True)).summary()
 
 
 def test_alignment_lowers_the_revisit_distance(summary):

@@ -19,7 +19,7 @@ from scenarios.logs.real_log import (
     estimate_range_noise,
     noise_params,
     open_log,
-    replay,
+    replay_log,
 )
 from semistatic.noise import spec_noise_params
 from semistatic.params import MapperParams
@@ -96,7 +96,7 @@ def test_noise_params_reject_negative_sigma():
 def test_auto_noise_is_the_default_and_reported():
     assert ReplayOptions().auto_noise
     scans = synthetic_log(seed=6, noise=0.005)
-    plain, auto = replay(scans, PLAIN).summary(), replay(scans, AUTO).summary()
+    plain, auto = replay_log(scans, PLAIN).summary(), replay_log(scans, AUTO).summary()
     assert auto["params"]["epsilon_m"] == pytest.approx(
         NOISE_EPSILON_SIGMAS * auto["noise"]["sigma_cm"] / 100.0, abs=1e-5)
     assert plain["params"]["epsilon_m"] == REPLAY_PARAMS.epsilon
@@ -106,8 +106,8 @@ def test_auto_noise_is_the_default_and_reported():
 
 def test_auto_noise_simplifies_the_noise_not_the_shape():
     scans = synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.02)
-    clean = replay(synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0), PLAIN).summary()
-    plain, auto = replay(scans, PLAIN).summary(), replay(scans, AUTO).summary()
+    clean = replay_log(synthetic_log(offset=(0.0, 0.0, 0.0), seed=5, noise=0.0), PLAIN).summary()
+    plain, auto = replay_log(scans, PLAIN).summary(), replay_log(scans, AUTO).summary()
     sigma = auto["noise"]["sigma_cm"] / 100.0
     assert auto["params"]["epsilon_m"] == pytest.approx(NOISE_EPSILON_SIGMAS * sigma, abs=1e-5)
     # At 3 cm the polylines follow the noise: several times the vertices of the noise-free
@@ -121,7 +121,7 @@ def test_auto_noise_simplifies_the_noise_not_the_shape():
 
 
 def test_noise_is_reported_without_auto_noise():
-    summary = replay(synthetic_log(seed=6, noise=0.01), PLAIN).summary()
+    summary = replay_log(synthetic_log(seed=6, noise=0.01), PLAIN).summary()
     assert summary["noise"]["scans"] == OPTIONS.noise_scans
     assert 0.7 < summary["noise"]["sigma_cm"] < 1.0
     assert summary["params"]["auto_noise"] is False
@@ -132,11 +132,11 @@ def test_every_scan_is_replayed_whatever_the_noise_sample(noise_scans):
     # without auto_noise: the sample only measures the noise, it changes no threshold
     scans = synthetic_log(seed=6)
     options = dataclasses.replace(PLAIN, noise_scans=noise_scans)
-    reference = replay(scans, PLAIN).summary()
-    summary = replay(iter(scans), options).summary()  # a stream, as open_log gives
+    reference = replay_log(scans, PLAIN).summary()
+    summary = replay_log(iter(scans), options).summary()  # a stream, as open_log gives
     assert summary["scans"] == len(scans)
     assert summary["table1_cm"] == reference["table1_cm"]
-    limited = replay(iter(scans), dataclasses.replace(options, max_scans=5, every=2))
+    limited = replay_log(iter(scans), dataclasses.replace(options, max_scans=5, every=2))
     assert limited.scans == 5
 
 
@@ -168,7 +168,7 @@ def test_noise_options_are_validated(changes, message):
     ],
 )
 def test_real_logs_with_auto_noise(log, sigma_cm, epsilon_m, table1_cm):
-    summary = replay(open_log(DATA / f"{log}-corrected.log.gz"), ReplayOptions()).summary()
+    summary = replay_log(open_log(DATA / f"{log}-corrected.log.gz"), ReplayOptions()).summary()
     assert sigma_cm[0] < summary["noise"]["sigma_cm"] < sigma_cm[1]
     assert epsilon_m[0] <= summary["params"]["epsilon_m"] <= epsilon_m[1]
     assert table1_cm[0] < summary["table1_cm"]["mean"]["avg"] < table1_cm[1]

@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.bench.runner import Schedule, run_scenario
+from scenarios.bench.clock import Schedule
+from scenarios.bench.runner import run_scenario
 from scenarios.cli import main
 from scenarios.results.outputs import summarize
 from scenarios.spec.load import load_scenario

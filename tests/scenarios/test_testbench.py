@@ -7,7 +7,7 @@ import pytest
 import shapely
 
 from robots.safety import FieldSet
-from scenarios import Testbench, bundled_scenarios
+from scenarios import FieldPolicy, Observer, Testbench, bundled_scenarios
 from scenarios.bench.policies import FieldReadings, FieldView, counted_occupancy
 from scenarios.bench.runner import run_scenario
 from scenarios.results.outputs import summarize
@@ -49,7 +49,7 @@ def tiny_log(tiny_spec):
     return run_scenario(tiny_spec)
 
 
-class Counter:
+class Counter(Observer):
     """Counts every hook call and checks what the bench shows at each."""
 
     def __init__(self):
@@ -166,7 +166,7 @@ def test_a_box_pushed_mid_lap_is_mapped_where_it_now_stands(tiny_spec):
     assert log.laps[0].detection["f1"] == 1.0
 
 
-class IgnoreWarning:
+class IgnoreWarning(FieldPolicy):
     """A policy that counts no reading for the warning field."""
 
     name = "ignore-warning"
@@ -175,7 +175,7 @@ class IgnoreWarning:
         return FieldReadings(warning=np.zeros(len(view.points), dtype=bool))
 
 
-class IgnoreEverything:
+class IgnoreEverything(FieldPolicy):
     """A policy that tries to count no reading at all: the protective floor must hold."""
 
     name = "ignore-everything"
@@ -240,7 +240,7 @@ def test_a_policy_sees_a_read_only_copy_of_the_readings():
     assert points[0, 0] == 1.0
 
 
-class NothingCounts:
+class NothingCounts(FieldPolicy):
     """Answers "no reading counts" for both fields, at every scan."""
 
     name = "nothing-counts"
@@ -250,7 +250,7 @@ class NothingCounts:
         return FieldReadings(warning=nothing, protective=nothing)
 
 
-class ReadingEditor:
+class ReadingEditor(FieldPolicy):
     """Moves every reading it is shown out of the fields, then lets them all count."""
 
     name = "reading-editor"
@@ -274,7 +274,7 @@ def test_no_policy_can_configure_away_the_stop_for_the_person_in_pal3b(policy):
     assert safety["collisions"] == 0
 
 
-class WrongAnswer:
+class WrongAnswer(FieldPolicy):
     def __init__(self, answer):
         self.answer = answer
         self.name = "wrong-answer"
@@ -303,7 +303,7 @@ def test_every_bundled_scenario_repeats_itself_exactly(name):
     assert_same_run(run_scenario(spec), run_scenario(spec))
 
 
-class RandomPusher:
+class RandomPusher(Observer):
     """Draws from its own stream every tick, as a script moving boxes at random would."""
 
     def __init__(self):
@@ -355,14 +355,14 @@ def test_a_box_that_appears_against_the_robot_is_caught_as_a_collision_at_once(t
         while bench.sim_time < 1.0:
             bench.step()
         x, y, heading = bench.true_pose
-        front = max(vertex[0] for vertex in bench.lead.robot.footprint)
+        front = max(vertex[0] for vertex in bench.fleet[0].robot.footprint)
         reach = front + 0.15 - 0.02  # the 0.3 m crate overlaps the front by 2 cm
         pose = (x + reach * np.cos(heading), y + reach * np.sin(heading), heading)
         bench.add_box(BoxSpec("crate", (0.3, 0.3, 0.5), tuple(float(v) for v in pose)))
         appeared = bench.sim_time
         for _ in range(48):
             bench.step()
-        events = bench.lead.contacts.events
+        events = bench.fleet[0].contacts.events
     assert len(events) == 1
     assert events[0].name == "crate"
     assert events[0].time == pytest.approx(appeared + bench.time_step)

@@ -11,8 +11,8 @@ from scenarios.logs.recording import (
     ScanRecorder,
     motion_changes,
     read_recording,
-    replay,
 )
+from scenarios.logs.recording_replay import replay_recording
 from scenarios.results.outputs import summarize
 from scenarios.spec.load import load_scenario
 from semistatic.errors import SpecError
@@ -57,7 +57,7 @@ def test_replay_at_other_thresholds_equals_full_resimulation(recorded):
     path, recorded_metrics, _ = recorded
     recording = read_recording(path)
     spec = load_scenario("pal1", overrides=["laps=2", "mapper.gate=0.05"])
-    replayed = replay(recording, spec)
+    replayed = replay_recording(recording, spec)
     simulated = summarize(run_scenario(spec))
     assert mapper_results(replayed) == mapper_results(simulated)
     # The point differs from the recorded one, so the equality says something.
@@ -68,7 +68,7 @@ def test_replay_at_other_thresholds_equals_full_resimulation(recorded):
 @pytest.mark.slow
 def test_replay_at_the_recorded_thresholds_gives_the_recorded_metrics(recorded):
     path, metrics, _ = recorded
-    replayed = replay(read_recording(path), load_scenario("pal1", overrides=RECORDED))
+    replayed = replay_recording(read_recording(path), load_scenario("pal1", overrides=RECORDED))
     assert mapper_results(replayed) == mapper_results(metrics)
 
 

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numba
 import pytest
 
-from scenarios import kernel_cache
+from semistatic import kernel_cache
 from semistatic.kernel_cache import Kernel, load_kernels, parse_type, publish, shares, type_text
 
 
@@ -217,7 +217,7 @@ def test_no_worker_is_forked_beside_other_threads_or_in_a_daemonic_process(monke
 # Two cheap kernels of two modules: one share each, this process's and a forked worker's.
 _FORK_SCRIPT = """
 import os, sys
-from scenarios import kernel_cache
+from semistatic import kernel_cache
 from semistatic.kernel_cache import Kernel
 
 kernels = [

@@ -14,12 +14,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from numpy.typing import ArrayLike
 
-from scenarios.results.figures._common import (
-    _counted,
-    _heading,
-    _output_path,
-    _write_png,
-)
+from scenarios.results.figures.style import count_text, figure_title, png_path, write_png
 from scenarios.results.metrics import ekf_correction_metrics
 from semistatic.frames import wrap_angle
 
@@ -166,7 +161,7 @@ def plot_ekf_corrections(
     ValueError: corrections: expected shape (100, 3) (one (dx, dy, dtheta) per stamp), \
 got (99, 3)
     """
-    path = _output_path(path)
+    path = png_path(path)
     stamps, corrections, sigmas = _ekf_arrays(stamps, corrections, sigmas)
     restarts = np.zeros(stamps.size, dtype=bool)
     if reinitialized is not None:
@@ -208,7 +203,7 @@ got (99, 3)
                 side = outside & (np.sign(correction) == sign)
                 edge = np.full(int(side.sum()), EKF_EDGE_MARKER * sign * limit)
                 ax.plot(stamps[side], edge, marker, color="tab:red", ms=6)
-            note = f"; {_counted(int(outside.sum()), 'correction')} beyond the axis, "
+            note = f"; {count_text(int(outside.sum()), 'correction')} beyond the axis, "
             note += f"up to {largest:.3g} {unit}"
         if limit > 0.0:
             ax.set_ylim(-limit, limit)
@@ -237,10 +232,10 @@ got (99, 3)
     fig.legend(handles=handles, loc="outside lower center", fontsize=8, ncols=len(handles))
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(
-        _heading(
+        figure_title(
             title,
             "EKF corrections (posterior − prior) within σ bounds",
-            f"{_counted(stamps.size, 'update')} over {stamps[-1] - stamps[0]:.1f} s",
+            f"{count_text(stamps.size, 'update')} over {stamps[-1] - stamps[0]:.1f} s",
         )
     )
-    return _write_png(fig, path)
+    return write_png(fig, path)

@@ -16,11 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from scenarios.results.figures._common import (
-    _heading,
-    _output_path,
-    _write_png,
-)
+from scenarios.results.figures.style import figure_title, png_path, write_png
 
 __all__ = ["plot_detection_scores", "plot_lap_times"]
 
@@ -142,7 +138,7 @@ def plot_lap_times(
     ValueError: lap_times['adaptive']: has 1 laps but the first policy has 2; every policy \
 must run the same laps
     """
-    path = _output_path(path)
+    path = png_path(path)
     times, counts = _lap_arrays(lap_times, stops)
     laps = next(iter(times.values())).size
     policies = list(times)
@@ -181,8 +177,8 @@ must run the same laps
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
     fig.legend(loc="outside lower center", ncols=len(policies), fontsize=8)
 
-    fig.suptitle(_heading(title, "lap times per speed policy", _lap_summary(times, counts)))
-    return _write_png(fig, path)
+    fig.suptitle(figure_title(title, "lap times per speed policy", _lap_summary(times, counts)))
+    return write_png(fig, path)
 
 
 def _score_table(per_lap: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
@@ -254,7 +250,7 @@ def plot_detection_scores(
     ...
     ValueError: per_lap[0].recall: must be in [0, 1] (or nan), got 1.2
     """
-    path = _output_path(path)
+    path = png_path(path)
     laps, scores = _score_table(per_lap)
 
     figure_width = float(np.clip(0.5 * laps.size + 3.0, *FIGURE_WIDTH_RANGE))
@@ -286,6 +282,6 @@ def plot_detection_scores(
         f"{'F1' if name == 'f1' else name} {means[name]:.2f}" for name in SCORE_NAMES
     )
     fig.suptitle(
-        _heading(title, "semi-static object detection per lap", f"mean over laps: {details}")
+        figure_title(title, "semi-static object detection per lap", f"mean over laps: {details}")
     )
-    return _write_png(fig, path)
+    return write_png(fig, path)

@@ -18,13 +18,13 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from numpy.typing import ArrayLike
 
-from scenarios.results.figures._common import (
-    _counted,
-    _heading,
-    _output_path,
-    _polyline_points,
-    _poses,
-    _write_png,
+from scenarios.results.figures.style import (
+    checked_poses,
+    checked_vertices,
+    count_text,
+    figure_title,
+    png_path,
+    write_png,
 )
 from worlds.checks import build_spline
 from worlds.plot import draw_box, draw_posts, draw_walls, figure_size
@@ -70,7 +70,7 @@ def _check_map_polylines(map_polylines: Sequence[Mapping[str, Any]]) -> list[dic
         status = polyline["status"]
         if status not in STATUS_STYLE:
             raise ValueError(f"{where}.status: must be one of {MAP_STATUSES}, got {status!r}")
-        points = _polyline_points(polyline["points"], f"{where}.points")
+        points = checked_vertices(polyline["points"], f"{where}.points")
         checked.append({"points": points, "status": status})
     return checked
 
@@ -174,20 +174,20 @@ def plot_polygonal_map(
     ValueError: map_polylines[0].status: must be one of ('confirmed', 'new', 'blank'), \
 got 'old'
     """
-    path = _output_path(path)
+    path = png_path(path)
     polylines = _check_map_polylines(map_polylines)
     outlines = {
-        str(name): _polyline_points(corners, f"truth_outlines[{name!r}]", 3)
+        str(name): checked_vertices(corners, f"truth_outlines[{name!r}]", 3)
         for name, corners in (truth_outlines or {}).items()
     }
     tracks = {
-        key: _poses(poses, key)
+        key: checked_poses(poses, key)
         for key, poses in (("trajectory", trajectory), ("estimate", estimate))
         if poses is not None
     }
 
     fleet = {
-        str(name): _poses(poses, f"trajectories[{name!r}]")
+        str(name): checked_poses(poses, f"trajectories[{name!r}]")
         for name, poses in (trajectories or {}).items()
     }
 
@@ -253,11 +253,11 @@ got 'old'
     ax.grid(True, lw=0.3, alpha=0.5)
     summary = ", ".join(f"{counts[status]} {status}" for status in MAP_STATUSES)
     ax.set_title(
-        _heading(
+        figure_title(
             title,
             f"polygonal map of {world.name}",
-            f"{_counted(len(polylines), 'map polyline')}: {summary}",
+            f"{count_text(len(polylines), 'map polyline')}: {summary}",
         ),
         fontsize=10,
     )
-    return _write_png(fig, path)
+    return write_png(fig, path)

@@ -13,10 +13,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
-from scenarios.results.figures._common import (
-    _output_path,
-    _write_png,
-)
+from scenarios.results.figures.style import png_path, write_png
 
 __all__ = ["plot_replay_map"]
 
@@ -41,7 +38,7 @@ def plot_replay_map(
     >>> plot_replay_map([[[0, 0], [1, 0]]], [[0.5, 0.01]], [[0.5, -1.0]], out).name
     'replay.png'
     """
-    path = _output_path(path)
+    path = png_path(path)
     raw = np.asarray(raw_points, dtype=float).reshape(-1, 2)
     track = np.asarray(trajectory, dtype=float)
     track = track.reshape(len(track), -1)[:, :2] if track.size else np.empty((0, 2))
@@ -62,4 +59,4 @@ def plot_replay_map(
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or "polyline map over the raw laser points")
     fig.tight_layout()
-    return _write_png(fig, path)
+    return write_png(fig, path)

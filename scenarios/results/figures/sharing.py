@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from scenarios.results.figures._common import _output_path, _write_png
+from scenarios.results.figures.style import png_path, write_png
 
 __all__ = ["plot_sharing_traffic"]
 
@@ -43,7 +43,7 @@ def plot_sharing_traffic(
     ...     out.stat().st_size > 5_000
     True
     """
-    path = _output_path(path)
+    path = png_path(path)
     stamps = np.asarray(stamps, dtype=float).reshape(-1)
     sizes = np.asarray(message_bytes, dtype=float).reshape(-1)
     grids = np.asarray(grid_bytes, dtype=float).reshape(-1)
@@ -66,4 +66,4 @@ def plot_sharing_traffic(
     axes.set_title(f"{title}\n{summary}")
     axes.grid(True, which="both", alpha=0.3)
     axes.legend(loc="lower right")
-    return _write_png(fig, path)
+    return write_png(fig, path)

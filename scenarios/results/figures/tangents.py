@@ -13,12 +13,12 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
-from scenarios.results.figures._common import (
-    _counted,
-    _heading,
-    _output_path,
-    _polyline_points,
-    _write_png,
+from scenarios.results.figures.style import (
+    checked_vertices,
+    count_text,
+    figure_title,
+    png_path,
+    write_png,
 )
 from semistatic.similarity import similarity, tangent_function
 
@@ -77,8 +77,8 @@ def plot_tangent_histograms(
     ...
     ValueError: p1: has zero length (fewer than 2 distinct vertices): no tangent function
     """
-    path = _output_path(path)
-    polylines = [_polyline_points(p, name, 2) for p, name in ((p0, "p0"), (p1, "p1"))]
+    path = png_path(path)
+    polylines = [checked_vertices(p, name, 2) for p, name in ((p0, "p0"), (p1, "p1"))]
     tangents = [tangent_function(points) for points in polylines]
     for (_, angles), name in zip(tangents, ("p0", "p1"), strict=True):
         if angles.size == 0:
@@ -88,7 +88,7 @@ def plot_tangent_histograms(
     score = similarity(polylines[0], polylines[1])
     lengths = [float(np.sum(np.hypot(*np.diff(p, axis=0).T))) for p in polylines]
     (breaks0, angles0), (breaks1, angles1) = tangents
-    # theta_0 is the mean of T1 - T0 over s (DESIGN.md detail 4).
+    # theta_0 is the mean of T1 - T0 over s (docs/design.md#detail-4).
     theta_0 = float(np.diff(breaks1) @ angles1 - np.diff(breaks0) @ angles0)
 
     fig = Figure(figsize=(10.5, 7.0), layout="constrained")
@@ -103,7 +103,8 @@ def plot_tangent_histograms(
         shape_ax.plot(*points[0], "s", ms=10, mfc="none", mec="black", mew=1.5, label="start")
         shape_ax.set_aspect("equal", adjustable="datalim")
         shape_ax.margins(0.12)
-        shape_ax.set_title(f"P{row}: {_counted(len(points), 'vertex', 'vertices')}, {length:.2f} m")
+        vertices = count_text(len(points), "vertex", "vertices")
+        shape_ax.set_title(f"P{row}: {vertices}, {length:.2f} m")
         shape_ax.set_xlabel("x [m]")
         shape_ax.set_ylabel("y [m]")
         shape_ax.grid(True, lw=0.3, alpha=0.5)
@@ -115,7 +116,7 @@ def plot_tangent_histograms(
         tangent_ax.set_xlim(0.0, 1.0)
         tangent_ax.set_xlabel("normalised arc length s")
         tangent_ax.set_ylabel(f"$T_{row}(s)$ [deg]")
-        tangent_ax.set_title(f"tangent function of P{row}, {_counted(angles.size, 'edge')}")
+        tangent_ax.set_title(f"tangent function of P{row}, {count_text(angles.size, 'edge')}")
         tangent_ax.grid(True, lw=0.3, alpha=0.5)
 
     union = np.union1d(breaks0, breaks1)
@@ -152,10 +153,10 @@ def plot_tangent_histograms(
 
     ratio = max(lengths) / min(lengths)
     fig.suptitle(
-        _heading(
+        figure_title(
             title,
             "shape similarity from tangent histograms",
             f"s(P0, P1) = {score:.4g}   (length ratio {ratio:.2f}; 0 means the same shape)",
         )
     )
-    return _write_png(fig, path)
+    return write_png(fig, path)

@@ -1,4 +1,11 @@
-"""Shared style, input checks and the atomic PNG write of :mod:`scenarios.results.figures`."""
+"""Shared style, input checks and the atomic PNG write of :mod:`scenarios.results.figures`.
+
+Examples
+--------
+>>> print(figure_title("", "Polygonal map", "sim1, 5 laps"))
+Polygonal map
+sim1, 5 laps
+"""
 
 from __future__ import annotations
 
@@ -11,6 +18,17 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
+__all__ = [
+    "DPI",
+    "PNG_MODE",
+    "checked_poses",
+    "checked_vertices",
+    "count_text",
+    "figure_title",
+    "png_path",
+    "write_png",
+]
+
 DPI = 150
 """Resolution of every PNG (dots per inch)."""
 
@@ -18,7 +36,7 @@ PNG_MODE = 0o644
 """File mode of a written PNG (``mkstemp`` creates its files private to the owner)."""
 
 
-def _output_path(path: str | os.PathLike[str]) -> Path:
+def png_path(path: str | os.PathLike[str]) -> Path:
     """Return ``path`` as a ``Path`` or raise if it does not name a ``.png`` file."""
     path = Path(path)
     if path.suffix.lower() != ".png":
@@ -26,7 +44,7 @@ def _output_path(path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def _write_png(fig: Figure, path: Path) -> Path:
+def write_png(fig: Figure, path: Path) -> Path:
     """Save ``fig`` to ``path`` atomically: a temporary file in the same folder, renamed."""
     path.parent.mkdir(parents=True, exist_ok=True)
     # Same directory, so os.replace is a rename on one file system: readers see either
@@ -45,7 +63,7 @@ def _write_png(fig: Figure, path: Path) -> Path:
     return path
 
 
-def _polyline_points(polyline: Any, name: str, minimum: int = 1) -> np.ndarray:
+def checked_vertices(polyline: Any, name: str, minimum: int = 1) -> np.ndarray:
     """Return the vertices of a ``Polyline`` or ``(N, 2)`` array as float64, checked."""
     points = np.asarray(getattr(polyline, "points", polyline), dtype=float)
     if points.ndim != 2 or points.shape[1] != 2:
@@ -57,7 +75,7 @@ def _polyline_points(polyline: Any, name: str, minimum: int = 1) -> np.ndarray:
     return points
 
 
-def _poses(poses: ArrayLike, name: str) -> np.ndarray:
+def checked_poses(poses: ArrayLike, name: str) -> np.ndarray:
     """Return an ``(N, 2)`` or ``(N, 3)`` pose array as float64, checked."""
     poses = np.asarray(poses, dtype=float)
     if poses.ndim != 2 or poses.shape[1] not in (2, 3) or poses.shape[0] == 0:
@@ -68,11 +86,17 @@ def _poses(poses: ArrayLike, name: str) -> np.ndarray:
     return poses
 
 
-def _counted(count: int, noun: str, plural: str = "") -> str:
-    """Return ``"1 edge"`` or ``"3 edges"``."""
+def count_text(count: int, noun: str, plural: str = "") -> str:
+    """Return ``"1 edge"`` or ``"3 edges"``.
+
+    Examples
+    --------
+    >>> count_text(1, "edge"), count_text(3, "edge"), count_text(2, "vertex", "vertices")
+    ('1 edge', '3 edges', '2 vertices')
+    """
     return f"{count} {noun if count == 1 else plural or noun + 's'}"
 
 
-def _heading(title: str, kind: str, details: str) -> str:
+def figure_title(title: str, kind: str, details: str) -> str:
     """Return a figure title: the caller's ``title`` (or ``kind``) over a line of details."""
     return f"{title or kind}\n{details}"

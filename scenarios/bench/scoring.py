@@ -1,67 +1,39 @@
-"""Observers: what an experiment adds to a run without touching the robot's tick.
+"""Scoring observers: each lap's maps against ground truth, and the paper's Table 1.
 
-An observer is any object with some of these methods; the
-:class:`~scenarios.bench.testbench.Testbench` calls the ones it has, in the order the
-observers were added:
-
-- ``on_lap_start(bench, lap)``: the robot stands re-localised at the path start, the
-  lap's boxes are in place;
-- ``on_scan(bench, record)``: after each safety-laser scan was used by the safety fields
-  and the local map (``record`` is a :class:`~scenarios.bench.records.ScanRecord`);
-- ``on_tick(bench)``: after each physics step;
-- ``on_lap_end(bench, lap_log)``: the lap is over (``lap_log`` is a
-  :class:`~scenarios.bench.records.LapLog` that the observer may complete).
-
-Observers read the bench (``bench.true_pose``, ``bench.local_maps``, ``bench.world`` ...);
-they must not drive the robot. An ``on_scan`` observer that never reads the record's
-``polylines`` (the segment's whole map, costly to build per scan) says so with a class
-attribute ``reads_map_polylines = False``. The bench attaches :class:`GroundTruthScoring` and
-:class:`Table1Reference` itself (their results are part of every
-:class:`~scenarios.bench.records.RunLog`); :class:`ProgressReporter` and :class:`ScanCallback`
-turn a plain callable into an observer.
+The bench attaches both to every vehicle it runs; their results are part of every
+:class:`~scenarios.bench.records.RunLog`. A recording's replay runs them again on recorded
+scans (:mod:`scenarios.logs.recording`).
 
 Examples
 --------
->>> class CountScans:
-...     def __init__(self):
-...         self.scans = 0
-...     def on_scan(self, bench, record):
-...         self.scans += 1
->>> CountScans().scans
-0
+>>> GroundTruthScoring().latencies(), Table1Reference().reference
+({}, {})
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
 
 import numpy as np
 import shapely
 
-from scenarios.bench.records import LapLog, ScanRecord
-from scenarios.results.metrics import (
+from scenarios.bench.ground_truth import (
     MATCH_DISTANCE,
     false_objects_near,
     match_polylines_to_boxes,
     score_lap,
 )
+from scenarios.bench.observer import Observer, VehicleView
+from scenarios.bench.records import LapLog, ScanRecord
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.frames import transform_points
-from sim.debug_view import DebugView
 from sim.ground_truth import box_outlines
 
 __all__ = [
-    "GUI_REFRESH_HZ",
     "OBSERVED_DISTANCE",
     "OBSERVED_READINGS",
-    "STATUS_COLOURS",
     "GroundTruthScoring",
-    "GuiView",
-    "ProgressReporter",
-    "ScanCallback",
     "Table1Reference",
-    "hook_table",
     "moved_boxes",
 ]
 
@@ -70,49 +42,6 @@ OBSERVED_READINGS = 5
 
 OBSERVED_DISTANCE = 0.03
 """Metres from a true box outline within which a reading counts as a hit on the box."""
-
-
-HOOKS = ("on_tick", "on_scan", "on_lap_start", "on_lap_end")
-"""The points of the closed loop where observers are called (module docstring)."""
-
-
-def hook_table(observers: list) -> dict:
-    """Return each hook's bound methods among ``observers``, and ``"wants_polylines"``.
-
-    Built once per observer set by whoever calls the observers (the bench, a fleet's
-    vehicle), so the per-scan path does not ask every observer again. ``"wants_polylines"``
-    says whether an ``on_scan`` observer may read ``ScanRecord.polylines`` (observers say
-    ``reads_map_polylines = False`` to spare the map copy).
-
-    Examples
-    --------
-    >>> class Counter:
-    ...     reads_map_polylines = False
-    ...     def on_scan(self, bench, record): ...
-    >>> table = hook_table([Counter()])
-    >>> len(table["on_scan"]), len(table["on_tick"]), table["wants_polylines"]
-    (1, 0, False)
-    """
-    table: dict = {hook: [getattr(o, hook) for o in observers if hasattr(o, hook)]
-                   for hook in HOOKS}
-    table["wants_polylines"] = any(getattr(o, "reads_map_polylines", True)
-                                   for o in observers if hasattr(o, "on_scan"))
-    return table
-
-
-GUI_REFRESH_HZ = 4.0
-"""Redraws per simulated second of the GUI's debug items (each redraw costs a frame)."""
-
-STATUS_COLOURS = {
-    "new": (0.1, 0.45, 1.0),
-    "confirmed": (0.0, 0.65, 0.0),
-    "blank": (0.55, 0.55, 0.55),
-}
-"""Colour (RGB) of a local-map polyline by its life-cycle status."""
-
-WARNING_COLOUR = (1.0, 0.6, 0.0)
-PROTECTIVE_COLOUR = (0.9, 0.0, 0.0)
-RETURNS_COLOUR = (0.75, 0.0, 0.75)
 
 
 def moved_boxes(spec: ScenarioSpec, lap: int) -> tuple[str, ...]:
@@ -171,7 +100,7 @@ def _mapped(local_maps, outline: np.ndarray) -> bool:
     return bool(lines) and bool(match_polylines_to_boxes(lines, {"box": outline}).any())
 
 
-class GroundTruthScoring:
+class GroundTruthScoring(Observer):
     """Score each lap's local maps against the simulator's ground truth.
 
     Per lap: detection precision/recall (:func:`scenarios.results.metrics.score_lap`), objects
@@ -191,8 +120,6 @@ class GroundTruthScoring:
     {}
     """
 
-    reads_map_polylines = False
-
     def __init__(self) -> None:
         self._truth: dict[str, np.ndarray] = {}
         self._revision = -1
@@ -202,30 +129,29 @@ class GroundTruthScoring:
         self._person_tracks: list[np.ndarray] = []
         self._vehicle_outlines: list[tuple[float, list[np.ndarray]]] = []
 
-    def _current_truth(self, bench) -> dict[str, np.ndarray]:
-        if self._revision != bench.layout_revision:
-            self._truth = box_outlines(bench.world)
-            self._revision = bench.layout_revision
+    def _current_truth(self, vehicle: VehicleView) -> dict[str, np.ndarray]:
+        if self._revision != vehicle.layout_revision:
+            self._truth = box_outlines(vehicle.world)
+            self._revision = vehicle.layout_revision
         return self._truth
 
-    def on_lap_start(self, bench, lap: int) -> None:
+    def on_lap_start(self, vehicle: VehicleView, lap: int) -> None:
         """Read the lap's boxes and decide which ones to time."""
-        self._current_truth(bench)
-        self._watch = moved_boxes(bench.spec, lap)
+        self._current_truth(vehicle)
+        self._watch = moved_boxes(vehicle.spec, lap)
         self._first_seen, self._detected_at = {}, {}
         self._person_tracks = []
 
-    def on_scan(self, bench, record: ScanRecord) -> None:
+    def on_scan(self, vehicle: VehicleView, record: ScanRecord) -> None:
         """Note where people stand and whether a watched box was seen and mapped."""
-        self._person_tracks.extend(p for p in bench.person_positions.values() if p is not None)
-        outlines = getattr(bench, "vehicle_outlines", None)
-        if outlines is not None:
-            self._vehicle_outlines.append((record.scan.stamp, outlines()))
+        self._person_tracks.extend(p for p in vehicle.person_positions.values() if p is not None)
+        if vehicle.fleet_size > 1:
+            self._vehicle_outlines.append((record.scan.stamp, vehicle.vehicle_outlines()))
         if not self._watch:
             return
-        truth = self._current_truth(bench)
+        truth = self._current_truth(vehicle)
         scan = record.scan
-        scans_so_far = bench.lap_log.safety_scans
+        scans_so_far = vehicle.lap_log.safety_scans
         true_points = None
         for name in self._watch:
             if name in self._detected_at or name not in truth:
@@ -236,7 +162,7 @@ class GroundTruthScoring:
                     true_points = scan.world_points()[scan.valid_mask()]
                 if _hits(outline, true_points) >= OBSERVED_READINGS:
                     self._first_seen[name] = scans_so_far
-            if name in self._first_seen and _mapped(bench.local_maps.values(), outline):
+            if name in self._first_seen and _mapped(vehicle.local_maps.values(), outline):
                 self._detected_at[name] = scans_so_far
 
     def latencies(self) -> dict[str, int | None]:
@@ -249,17 +175,17 @@ class GroundTruthScoring:
             if name in self._first_seen
         }
 
-    def on_lap_end(self, bench, lap_log: LapLog) -> None:
+    def on_lap_end(self, vehicle: VehicleView, lap_log: LapLog) -> None:
         """Score the lap's maps and write the figures into ``lap_log``."""
-        truth = self._current_truth(bench)
+        truth = self._current_truth(vehicle)
         lap_log.latencies = self.latencies()
         lap_log.detection, lap_log.false_objects_from_people = score_lap(
-            bench.local_maps, bench.segments, truth, self._person_tracks
+            vehicle.local_maps, vehicle.segments, truth, self._person_tracks
         )
-        if hasattr(bench, "vehicle_outlines"):
+        if vehicle.fleet_size > 1:
             lap_log.false_objects_from_vehicles = false_objects_near(
-                bench.local_maps, bench.segments, truth, self._vehicles_at)
-        bench.log.truth_after_lap.append(truth)
+                vehicle.local_maps, vehicle.segments, truth, self._vehicles_at)
+        vehicle.log.truth_after_lap.append(truth)
 
     def _vehicles_at(self, t: float) -> shapely.Geometry:
         """Return where the vehicles stood at the safety scan nearest ``t`` (of the run)."""
@@ -270,13 +196,13 @@ class GroundTruthScoring:
         return shapely.union_all(shapely.polygons(outlines)) if outlines else shapely.Polygon()
 
 
-class Table1Reference:
+class Table1Reference(Observer):
     """The paper's Table 1 experiment (Sec. 6) beside the operating maps.
 
     Lap 1 builds the local maps; at its end they are copied as the reference. In every
     later lap each safety scan's polylines are associated with the reference of their
     segment without changing it, and the restricted Hausdorff distance of every pair is
-    recorded under ``"segment/map id"`` in ``bench.log.table1_distances``. The first pair
+    recorded under ``"segment/map id"`` in ``vehicle.log.table1_distances``. The first pair
     of two polylines with at least three vertices each is kept as ``example_pair`` (paper
     Fig. 2).
 
@@ -286,12 +212,10 @@ class Table1Reference:
     {}
     """
 
-    reads_map_polylines = False
-
     def __init__(self) -> None:
         self.reference: dict = {}
 
-    def on_scan(self, bench, record: ScanRecord) -> None:
+    def on_scan(self, vehicle: VehicleView, record: ScanRecord) -> None:
         """Associate the scan's polylines with the lap-1 reference of its segment."""
         if record.lap == 1 or record.report is None:
             return
@@ -302,7 +226,7 @@ class Table1Reference:
             record.scan, record.sensor_pose, scan_polylines=record.report.scan_polylines,
             find_missed=False,
         )
-        log = bench.log
+        log = vehicle.log
         for pair in report.associated:
             key = f"{record.segment}/{pair.map_id}"
             log.table1_distances.setdefault(key, []).append(pair.distance)
@@ -316,109 +240,8 @@ class Table1Reference:
                         transform_points(origin, scan_line.points),
                     )
 
-    def on_lap_end(self, bench, lap_log: LapLog) -> None:
+    def on_lap_end(self, vehicle: VehicleView, lap_log: LapLog) -> None:
         """After lap 1, keep a copy of the local maps as the reference."""
         if lap_log.lap == 1:
-            self.reference = copy.deepcopy(dict(bench.local_maps))
-            bench.log.reference_maps = self.reference
-
-
-class ProgressReporter:
-    """Call ``advance(seconds)`` with the simulated time of every physics step (a progress bar).
-
-    Examples
-    --------
-    >>> seen = []
-    >>> ProgressReporter(seen.append).advance is not None
-    True
-    """
-
-    def __init__(self, advance: Callable[[float], None]) -> None:
-        self.advance = advance
-
-    def on_tick(self, bench) -> None:
-        """Report one physics step."""
-        self.advance(bench.time_step)
-
-
-class ScanCallback:
-    """Call ``callback(record)`` with every scan's :class:`~scenarios.bench.records.ScanRecord`.
-
-    E.g. a :class:`~scenarios.logs.bag.BagRecorder`.
-
-    Examples
-    --------
-    >>> records = []
-    >>> ScanCallback(records.append).callback == records.append
-    True
-    """
-
-    def __init__(self, callback: Callable[[ScanRecord], None]) -> None:
-        self.callback = callback
-
-    def on_scan(self, bench, record: ScanRecord) -> None:
-        """Pass the record on."""
-        self.callback(record)
-
-
-class GuiView:
-    """Show the run in PyBullet's window (the bench adds it when ``gui=True``).
-
-    A few times per simulated second (``refresh_hz``) the camera is put above the robot
-    and the debug items are redrawn: the current segment's warning (orange) and
-    protective (red) fields where the EKF places the robot, the last safety scan's
-    returns (magenta) and every local map's polylines, coloured by life-cycle status
-    (:data:`STATUS_COLOURS`). Headless, it draws nothing.
-
-    Examples
-    --------
-    >>> GuiView().refresh_hz
-    4.0
-    """
-
-    reads_map_polylines = False
-
-    def __init__(self, refresh_hz: float = GUI_REFRESH_HZ) -> None:
-        self.refresh_hz = float(refresh_hz)
-        self.view: DebugView | None = None
-        self._returns = np.empty((0, 2))
-        self._drawn_at = -np.inf
-
-    def on_lap_start(self, bench, lap: int) -> None:
-        """Bind to the bench's client and draw at once: the robot is back at the start."""
-        if self.view is None or self.view.sim is not bench.sim:
-            self.view = DebugView(bench.sim)
-        self._returns = np.empty((0, 2))
-        self.draw(bench)
-
-    def on_scan(self, bench, record: ScanRecord) -> None:
-        """Keep the scan's returns (world frame) for the next redraw."""
-        scan = record.scan
-        self._returns = scan.world_points()[scan.valid_mask()]
-
-    def on_tick(self, bench) -> None:
-        """Redraw when ``1 / refresh_hz`` simulated seconds have passed."""
-        if bench.sim_time - self._drawn_at >= 1.0 / self.refresh_hz:
-            self.draw(bench)
-
-    def draw(self, bench) -> None:
-        """Move the camera and redraw every item now."""
-        view = self.view
-        if view is None or not view.active:
-            return
-        self._drawn_at = bench.sim_time
-        view.follow(bench.true_pose)
-        pose, fields = bench.ekf_pose, bench.segment.fields
-        view.draw_polylines(
-            "fields",
-            [transform_points(pose, fields.warning), transform_points(pose, fields.protective)],
-            [WARNING_COLOUR, PROTECTIVE_COLOUR],
-            closed=True,
-        )
-        view.draw_points("returns", self._returns, RETURNS_COLOUR)
-        lines, colours = [], []
-        for local_map in bench.local_maps.values():
-            for map_id, line in local_map.world_polylines().items():
-                lines.append(line.points)
-                colours.append(STATUS_COLOURS[local_map[map_id].status])
-        view.draw_polylines("maps", lines, colours, width=3.0)
+            self.reference = copy.deepcopy(dict(vehicle.local_maps))
+            vehicle.log.reference_maps = self.reference

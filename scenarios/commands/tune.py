@@ -37,6 +37,7 @@ from pathlib import Path
 
 from scenarios.process.progress import count_progress
 from scenarios.process.staging import check_output_dir
+from scenarios.spec.load import scenario_help
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS
 from scenarios.tuning.points import GRID_OPTION, parse_grids, parse_seeds, sweep_points
 from scenarios.tuning.run import RecordingSet, run_sweep
@@ -64,9 +65,8 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "--seeds), rank the results and write DIR/sweep.csv, DIR/sweep.json and "
                     "DIR/figures/sweep.png.",
     )
-    tune.add_argument("scenario", help="bundled name (sim1, sim2, pal1, pal3a, pal3b) or a .toml; "
-                                       "with --param several, comma-separated (pal1,sim1): "
-                                       "every trial runs each of them")
+    tune.add_argument("scenario", help=f"{scenario_help()}; with --param several, "
+                                       "comma-separated (pal1,sim1): every trial runs each")
     tune.add_argument(
         "--grid", dest="grids", action="append", default=[], metavar="KEY=V1,V2,...",
         help="values to sweep, e.g. --grid mapper.gate=0.08,0.12 --grid policy=conservative,"

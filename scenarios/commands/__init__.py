@@ -1,0 +1,1 @@
+"""The command line's commands: check, run, table, replay, evaluate and tune."""

@@ -1,0 +1,1 @@
+"""Results of runs: metrics, the output directory, Table 1 and the figures."""
