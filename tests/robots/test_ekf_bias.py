@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from robots.ekf import EKFLocalizer, EKFParams, _positive_definite
+from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, range_bearing_model
 from semistatic.frames import compose, wrap_angle
 from tests.robots.test_ekf import DT, MOUNT, POSTS, observe, true_increments
@@ -354,16 +354,30 @@ def test_broken_four_state_covariance_is_repaired():
     assert ekf.range_bias_sigma == pytest.approx(BIAS_SIGMA)
 
 
-def test_positive_definite_check_agrees_with_the_eigenvalues():
+@pytest.mark.parametrize("params", [THREE_STATE, FOUR_STATE], ids=["three", "four"])
+def test_a_positive_definite_covariance_is_kept_and_any_other_repaired(params):
+    """The positive-definiteness check against the eigenvalues, through ``initialize``."""
     rng = np.random.default_rng(22)
-    for size in (3, 4):
-        for _ in range(300):
-            root = rng.normal(size=(size, size))
-            shift = rng.uniform(-1.0, 1.0)
-            matrix = root @ root.T + shift * np.eye(size)
-            smallest = np.linalg.eigvalsh(matrix).min()
-            if abs(smallest) > 1e-9:
-                assert _positive_definite(matrix) == (smallest > 0.0)
+    kept = repaired = 0
+    for _ in range(300):
+        root = rng.normal(size=(3, 3))
+        matrix = root @ root.T + rng.uniform(-1.0, 1.0) * np.eye(3)
+        smallest = np.linalg.eigvalsh(matrix).min()
+        if abs(smallest) <= 1e-9:
+            continue
+        ekf = EKFLocalizer(POSTS, params)
+        ekf.initialize(np.zeros(3), matrix)
+        pose_cov = ekf.state_covariance[:3, :3]
+        if smallest > 0.0:
+            np.testing.assert_array_equal(pose_cov, matrix)
+            kept += 1
+        else:
+            assert not np.array_equal(pose_cov, matrix)
+            np.testing.assert_array_equal(pose_cov, pose_cov.T)
+            assert np.linalg.eigvalsh(pose_cov).min() > 0.0
+            repaired += 1
+    assert kept > 50
+    assert repaired > 50
 
 
 @pytest.mark.parametrize(
