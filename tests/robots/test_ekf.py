@@ -121,6 +121,7 @@ def nees(truths, estimates, covariances):
 # ---------------------------------------------------------------- acceptance: consistency
 
 
+@pytest.mark.slow  # 50 runs of 200 steps
 def test_mean_nees_over_monte_carlo_runs_lies_in_the_chi_square_band():
     runs, steps = 50, 200
     all_nees, position_sq, heading_sq = [], [], []
