@@ -146,6 +146,7 @@ def code_world() -> WorldSpec:
                      people=(), path=path)
 
 
+@pytest.mark.slow  # another run of the tiny world, to the last bit
 def test_a_world_built_in_code_runs_like_its_file(tiny_spec, tiny_log):
     with Testbench(tiny_spec, world=code_world()) as bench:
         log = bench.run()
