@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test run bench bench-all accuracy fuzz lint docs clean
+.PHONY: install test test-all run bench bench-all accuracy fuzz lint docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -25,8 +25,14 @@ lint: install
 docs: install
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
+# The fast suite (pyproject's addopts leave out the slow, bench, accuracy and fuzz markers).
 test: lint docs
 	$(PY) -m pytest -q
+
+# Every test including the slow ones (closed-loop determinism of every bundled scenario,
+# fleets, real logs); bench, accuracy and fuzz keep their own targets.
+test-all: lint
+	$(PY) -m pytest -q -m 'not bench and not accuracy and not fuzz'
 
 run: install
 	$(VENV)/bin/semistatic run sim1 --compare --out $(OUT)/sim1

@@ -75,7 +75,7 @@ def warm_up() -> float:
     ekf = EKFLocalizer([[4.0, 0.0], [0.0, 4.0]], EKFParams(range_bias_sigma=0.01))
     ekf.initialize([0.0, 0.0, 0.0], np.diag([0.01, 0.01, 0.001]), stamp=0.0)
     ekf.update([LandmarkObservation(4.0, 0.0, np.diag([1e-4, 1e-6]), [0])], stamp=0.1)
-    path._track(1.0, 0.1, 0.9, 1.0)  # the follower's projection
+    path.project((1.0, 0.1), s_hint=0.9, window=1.0)  # the follower's projection
     return time.perf_counter() - start
 
 

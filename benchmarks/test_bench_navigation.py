@@ -1,20 +1,15 @@
-"""Per-tick hot paths of the navigation stack and the simulator glue: fast vs reference.
+"""Per-tick hot paths of the navigation stack and the simulator glue.
 
-Each benchmark times the current code and the reference it must reproduce (the array
-code path, or the earlier implementation kept in ``tests/``) in the same run, on the
-``pal1`` world, and prints the median per call in microseconds. The per-call clock is
+Each benchmark times the current code on the ``pal1`` world and prints the median per
+call in microseconds; where a plainer way to do the same exists (numpy or shapely
+calls), it is timed beside it. The per-call clock is
 the CPU time of the calling thread (``time.thread_time``): on a machine shared with
 other jobs, wall-clock medians mostly measure the wait for a core. Calls into PyBullet,
 whose ray casts use worker threads, are timed on the wall clock. One more benchmark
 runs a whole lap of ``pal1`` and prints the wall / engine ratio and the real-time factor.
 
-The references: ``tests/robots/landmarks_reference.py`` (per-post detection),
-``tests/robots/follower_reference.py`` (array path queries),
-``tests/sim/encoders_reference.py`` (array odometry), ``tests/sim/laser_reference.py``
-(the original scan post-processing); the tests hold each fast path to its reference's
-bits (the landmarks' to rounding). The SimUGV figures have no reference: before the
-float rewrite they were about 4, 12, 13 and 16 us (wheel angles, true pose, sensor pose,
-command) on this machine.
+The SimUGV figures have no reference: before the float rewrite they were about 4, 12, 13
+and 16 us (wheel angles, true pose, sensor pose, command) on this machine.
 
 Run with ``.venv/bin/python -m pytest -m bench -s benchmarks/test_bench_navigation.py``
 (about 30 s; the lap alone about 10 s).
@@ -47,10 +42,6 @@ from sim.laser import RaycastLaser
 from sim.people import PARKED_Z, People, person_position
 from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
-from tests.robots.follower_reference import ArrayPathFollower
-from tests.robots.landmarks_reference import detect_landmarks_reference
-from tests.sim.encoders_reference import ReferenceEncoders
-from tests.sim.laser_reference import ReferenceLaser
 from worlds.load import load_world
 
 pytestmark = pytest.mark.bench
@@ -63,7 +54,10 @@ def median_us(run, repeats=REPEATS, clock=time.thread_time):
     return timed_median_us(run, repeats, clock)
 
 
-def report(name, fast_us, reference_us):
+def report(name, fast_us, reference_us=None):
+    if reference_us is None:
+        print(f"\n{name}: {fast_us:8.1f} us median")
+        return
     print(
         f"\n{name}: {fast_us:8.1f} us median (reference {reference_us:8.1f} us, "
         f"{reference_us / fast_us:5.1f}x)"
@@ -103,50 +97,29 @@ def test_projection_with_hint(path):
     points, hints = tracked_queries(path)
     queries = list(zip(points, hints.tolist(), strict=True))
     fast = median_over_queries(lambda p, h: path.project(p, s_hint=h, window=1.0), queries)
-    reference = median_over_queries(
-        lambda p, h: path.project(p[None, :], s_hint=h, window=1.0), queries
-    )
-    report("SplinePath.project (one point, hint, 1 m window)", fast, reference)
-    assert all(
-        path.project(p, s_hint=h, window=1.0) == path.project(p[None, :], s_hint=h, window=1.0)[0]
-        for p, h in queries[:200]
-    )
+    report("SplinePath.project (one point, hint, 1 m window)", fast)
 
 
 def test_pose_and_curvature(path):
     s = np.random.default_rng(1).uniform(0.0, path.length, REPEATS).tolist()
     queries = [(value,) for value in s]
     fast = median_over_queries(lambda v: (path.pose(v), path.curvature(v)), queries)
-    reference = median_over_queries(
-        lambda v: (path.pose(np.array(v)), path.curvature(np.array(v))), queries
-    )
-    report("SplinePath.pose + curvature (one s)", fast, reference)
+    report("SplinePath.pose + curvature (one s)", fast)
 
 
 def test_follower_command(path):
-    # One closed loop per follower, timed separately: interleaving the two would have the
-    # slow reference flush the caches before every fast call. Both drive the same loop
-    # (their commands are equal to the bit, as the tests require).
-    times = {}
-    for name, follower in (
-        ("fast", ChainedFormFollower(path)),
-        ("reference", ArrayPathFollower(path.knots)),
-    ):
-        pose = path.pose(0.0) + np.array([0.0, 0.05, 0.02])
-        times[name] = []
-        for _ in range(REPEATS):
-            start = time.thread_time()
-            v, omega = follower.command(pose, 0.02)
-            times[name].append(time.thread_time() - start)
-            pose = pose + 0.02 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), omega])
-            if follower.done:
-                follower.reset()
-                pose = path.pose(0.0)
-    report(
-        "ChainedFormFollower.command",
-        1e6 * float(np.median(times["fast"])),
-        1e6 * float(np.median(times["reference"])),
-    )
+    follower = ChainedFormFollower(path)
+    pose = path.pose(0.0) + np.array([0.0, 0.05, 0.02])
+    times = []
+    for _ in range(REPEATS):
+        start = time.thread_time()
+        v, omega = follower.command(pose, 0.02)
+        times.append(time.thread_time() - start)
+        pose = pose + 0.02 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), omega])
+        if follower.done:
+            follower.reset()
+            pose = path.pose(0.0)
+    report("ChainedFormFollower.command", 1e6 * float(np.median(times)))
 
 
 @pytest.fixture(scope="module")
@@ -162,11 +135,8 @@ def test_detect_landmarks(pal1_scans):
     options = {"post_radius": 0.04, "range_sigma": LMS100.range_sigma}
     queries = [(scan,) for scan in pal1_scans]
     fast = median_over_queries(lambda scan: detect_landmarks(scan, **options), queries)
-    reference = median_over_queries(
-        lambda scan: detect_landmarks_reference(scan, **options), queries
-    )
     posts = np.mean([len(detect_landmarks(scan, **options)) for scan in pal1_scans])
-    report(f"detect_landmarks ({LMS100.num_beams} beams, {posts:.1f} posts/scan)", fast, reference)
+    report(f"detect_landmarks ({LMS100.num_beams} beams, {posts:.1f} posts/scan)", fast)
 
 
 def test_laser_scan_overhead(pal1, path):
@@ -199,35 +169,17 @@ def test_laser_scan_overhead(pal1, path):
     )
 
 
-def test_laser_scan_against_the_original_code(pal1, path):
-    """Our Python around one ``rayTestBatch`` (replayed): lean scan vs the original code."""
-    with SimClient() as sim:
-        world = SimWorld(sim, pal1)
-        poses = [(*path.pose(s)[:2], 0.3, path.pose(s)[2]) for s in np.linspace(0, 10, 50)]
-        figures = []
-        for kind in (RaycastLaser, ReferenceLaser):
-            laser = kind(sim, LMS100, world, np.random.default_rng(3))
-            results = sim.bullet.rayTestBatch(laser._from, laser._to)
-            laser._ray_test_batch = lambda *args, results=results, **kwargs: results
-            figures.append(median_us(lambda laser=laser: laser.scan(poses[0]), 1000))
-    report("RaycastLaser.scan, our Python (rayTestBatch replayed)", *figures)
+def test_odometry_read():
+    """One 50 Hz odometry read: the increment and its covariance."""
+    encoders = WheelEncoders(PIONEER3DX, np.random.default_rng(0))
+    encoders.reset([0.0, 0.0])
+    angles = np.zeros(2)
 
+    def read():
+        angles[:] += (0.16, 0.17)  # 2 cm per wheel per tick, turning gently
+        encoders.read(angles)
 
-def test_odometry_against_the_array_code():
-    """One 50 Hz odometry read: increment + covariance, floats vs the original arrays."""
-    figures = []
-    for kind in (WheelEncoders, ReferenceEncoders):
-        encoders = kind(PIONEER3DX, np.random.default_rng(0))
-        encoders.reset([0.0, 0.0])
-        angles = np.zeros(2)
-
-        def read(encoders=encoders, angles=angles):
-            angles += (0.16, 0.17)  # 2 cm per wheel per tick, turning gently
-            encoders.odometry_increment(angles)
-            encoders.increment_covariance(encoders.last_tick_deltas)
-
-        figures.append(median_us(read))
-    report("WheelEncoders.odometry_increment + increment_covariance", *figures)
+    report("WheelEncoders.read (increment + covariance)", median_us(read))
 
 
 def test_safety_fields_against_the_plain_code(pal1, pal1_scans):

@@ -228,29 +228,14 @@ class ChainedFormFollower:
         [0.02, 0.199, 0.1]
         """
         x, y, theta = np.asarray(pose, dtype=float)[:3].tolist()
-        x_ref, y_ref, theta_ref, _ = self._reference(self._track(x, y))
-        return self._offset(x, y, theta, x_ref, y_ref, theta_ref)
+        x_ref, y_ref, theta_ref = self.path.pose(self._project(x, y)).tolist()
+        return _offset(x, y, theta, x_ref, y_ref, theta_ref)
 
-    # The three path queries of a command, on floats (they run at the control rate); a
-    # test subclass routes them through the array code paths to check the floats' bits.
-    def _track(self, x: float, y: float) -> float:
-        """Return ``path.project((x, y))`` searched around the current progress."""
-        return self.path._track(x, y, self.progress, float(self.params.projection_window))
-
-    def _reference(self, s: float) -> tuple[float, float, float, float]:
-        """Return the path pose ``(x, y, heading)`` at ``s`` and its curvature."""
-        return self.path._pose_and_curvature(s)
-
-    @staticmethod
-    def _offset(
-        x: float, y: float, theta: float, x_ref: float, y_ref: float, theta_ref: float
-    ) -> tuple[float, float, float]:
-        """Return ``(xe, ye, theta_e)``: the pose's offset from the reference, robot frame."""
-        dx, dy = x - x_ref, y - y_ref
-        c, s_theta = math.cos(theta), math.sin(theta)
-        xe = c * dx + s_theta * dy
-        ye = -s_theta * dx + c * dy
-        return xe, ye, wrap_angle(theta - theta_ref)
+    def _project(self, x: float, y: float) -> float:
+        """Return the progress at ``(x, y)``: the projection searched around the current one."""
+        return self.path.project(
+            (x, y), s_hint=self.progress, window=self.params.projection_window
+        )
 
     def command(self, pose: ArrayLike, dt: float, speed_scale: float = 1.0) -> tuple[float, float]:
         """Advance the progress to ``pose`` and return the wheel-base command ``(v, omega)``.
@@ -285,7 +270,7 @@ class ChainedFormFollower:
             )
         x, y, theta = np.asarray(pose, dtype=float)[:3].tolist()
         params = self.params
-        self.progress = self._track(x, y)
+        self.progress = self._project(x, y)
         remaining = self.path.length - self.progress
         if remaining <= params.goal_tolerance:
             self.done = True
@@ -298,10 +283,9 @@ class ChainedFormFollower:
             # Brake profile: never faster than the speed from which the robot can still
             # stop at the path end with max_deceleration. A closed path has no end.
             u1r = min(u1r, math.sqrt(2.0 * params.max_deceleration * remaining))
-        # The reference pose and curvature from one spline evaluation (as pose + curvature).
-        x_ref, y_ref, theta_ref, curvature = self._reference(self.progress)
-        u2r = curvature * u1r
-        xe, ye, theta_e = self._offset(x, y, theta, x_ref, y_ref, theta_ref)
+        x_ref, y_ref, theta_ref = self.path.pose(self.progress).tolist()
+        u2r = self.path.curvature(self.progress) * u1r
+        xe, ye, theta_e = _offset(x, y, theta, x_ref, y_ref, theta_ref)
         theta_e = min(max(theta_e, -MAX_HEADING_ERROR), MAX_HEADING_ERROR)
         v = u1r - params.k1 * abs(u1r) * xe
         omega = u2r - params.k2 * u1r * ye - params.k3 * abs(u1r) * math.tan(theta_e)
@@ -326,3 +310,14 @@ class ChainedFormFollower:
         omega = min(max(omega, last_omega - angular_step), last_omega + angular_step)
         self._last_command = (float(v), float(omega))
         return self._last_command
+
+
+def _offset(
+    x: float, y: float, theta: float, x_ref: float, y_ref: float, theta_ref: float
+) -> tuple[float, float, float]:
+    """Return ``(xe, ye, theta_e)``: the pose's offset from the reference, robot frame."""
+    dx, dy = x - x_ref, y - y_ref
+    c, s_theta = math.cos(theta), math.sin(theta)
+    xe = c * dx + s_theta * dy
+    ye = -s_theta * dx + c * dy
+    return xe, ye, wrap_angle(theta - theta_ref)

@@ -28,7 +28,6 @@ array([ 0.   ,  0.   , -0.137])
 from __future__ import annotations
 
 import itertools
-import math
 
 import numba
 import numpy as np
@@ -139,9 +138,9 @@ class SplinePath:
         self.bc_type = bc_type
         knot_t = np.concatenate([[0.0], np.cumsum(chords)])
         self._spline = CubicSpline(knot_t, knots, axis=0, bc_type=bc_type)
-        # Plain arrays: scipy's PPoly attribute access is slow enough to matter at 50 Hz.
-        self._breaks = np.array(self._spline.x)
-        self._coefficients = np.array(self._spline.c)
+        # Every cubic as plain (breaks, (4, pieces, columns) coefficients) arrays, the
+        # layout the compiled kernels read: r(t), then t(s) and s(t).
+        self._xy = _cubic_table(self._spline)
 
         table_t, knot_rows = _table_nodes(knot_t)
         speed = np.hypot(*self._evaluate(table_t)[1].T)
@@ -156,31 +155,23 @@ class SplinePath:
         knot_s = table_s[knot_rows]
         knot_s.flags.writeable = False
         self.knot_s = knot_s
-        s_to_t = CubicHermiteSpline(table_s, table_t, 1.0 / speed)
-        self._s_to_t_breaks = np.array(s_to_t.x)
-        self._s_to_t_coefficients = np.array(s_to_t.c)
+        self._s_to_t = _cubic_table(CubicHermiteSpline(table_s, table_t, 1.0 / speed))
         # The forward map, for projections found in t.
-        t_to_s = CubicHermiteSpline(table_t, table_s, speed)
-        self._t_to_s_breaks = np.array(t_to_s.x)
-        self._t_to_s_coefficients = np.array(t_to_s.c)
+        self._t_to_s = _cubic_table(CubicHermiteSpline(table_t, table_s, speed))
 
         count = max(2, int(np.ceil(self.length / PROJECTION_SPACING)) + 1)
-        self._coarse_s = np.linspace(0.0, self.length, count)
-        self._coarse_t = self._t(self._coarse_s)
-        self._coarse_points = self._evaluate(self._coarse_t)[0]
-
-        # What the compiled projection reads: every cubic as (4, pieces, columns).
+        coarse_s = np.linspace(0.0, self.length, count)
+        coarse_t = self._t(coarse_s)
+        coarse_points = self._evaluate(coarse_t)[0]
+        # What the compiled projection reads.
         self._projection_tables = (
-            np.ascontiguousarray(self._coarse_s),
-            np.ascontiguousarray(self._coarse_t),
-            np.ascontiguousarray(self._coarse_points[:, 0]),
-            np.ascontiguousarray(self._coarse_points[:, 1]),
-            np.ascontiguousarray(self._breaks),
-            np.ascontiguousarray(self._coefficients),
-            np.ascontiguousarray(self._s_to_t_breaks),
-            np.ascontiguousarray(self._s_to_t_coefficients[:, :, None]),
-            np.ascontiguousarray(self._t_to_s_breaks),
-            np.ascontiguousarray(self._t_to_s_coefficients[:, :, None]),
+            coarse_s,
+            coarse_t,
+            np.ascontiguousarray(coarse_points[:, 0]),
+            np.ascontiguousarray(coarse_points[:, 1]),
+            *self._xy,
+            *self._s_to_t,
+            *self._t_to_s,
         )
 
     @property
@@ -215,27 +206,11 @@ class SplinePath:
 
     def _t(self, s: ArrayLike) -> np.ndarray:
         s = np.minimum(np.maximum(np.asarray(s, dtype=float), 0.0), self.length)
-        return _evaluate_cubic(self._s_to_t_breaks, self._s_to_t_coefficients, s)[0]
+        return _evaluate_cubic(*self._s_to_t, s)[0][..., 0]
 
     def _evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return position, first and second ``t``-derivative of the spline at ``t``."""
-        return _evaluate_cubic(self._breaks, self._coefficients, t)
-
-    def _t_one(self, s: float) -> float:
-        """Return ``t(s)`` for one finite float ``s``, exactly as ``_t`` computes it."""
-        breaks, coefficients = self._projection_tables[6:8]
-        return _cubic_at(breaks, coefficients, min(max(s, 0.0), self.length), 0)[0]
-
-    def _scalar_evaluate(self, t: float) -> tuple[float, float, float, float, float, float]:
-        """Return ``(x, y, x', y', x'', y'')`` at one ``t``: ``_evaluate``'s expressions, compiled.
-
-        The follower's 50 Hz pose and curvature: one compiled call per coordinate costs a
-        fraction of numpy's per-call overhead on tiny arrays.
-        """
-        breaks, coefficients = self._projection_tables[4:6]
-        x, dx, ddx = _cubic_at(breaks, coefficients, t, 0)
-        y, dy, ddy = _cubic_at(breaks, coefficients, t, 1)
-        return x, y, dx, dy, ddx, ddy
+        return _evaluate_cubic(*self._xy, t)
 
     def point(self, s: ArrayLike) -> np.ndarray:
         """Return the path point(s) at arc length ``s``: shape ``s.shape + (2,)``.
@@ -255,9 +230,6 @@ class SplinePath:
         >>> round(SplinePath([(0.0, 0.0), (0.0, 3.0)]).heading(1.0), 4)
         1.5708
         """
-        if _is_finite_float(s):
-            _, _, dx, dy, _, _ = self._scalar_evaluate(self._t_one(s))
-            return float(np.arctan2(dy, dx))
         velocity = self._evaluate(self._t(s))[1]
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
         return float(heading) if heading.ndim == 0 else heading
@@ -271,10 +243,6 @@ class SplinePath:
         >>> round(parabola.curvature(parabola.length / 2), 2)  # y = 1 - x^2 at its apex
         2.0
         """
-        if _is_finite_float(s):
-            _, _, dx, dy, ddx, ddy = self._scalar_evaluate(self._t_one(s))
-            # numpy's hypot and power, not math's: they round differently in the last bit.
-            return float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
         _, d1, d2 = self._evaluate(self._t(s))
         cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
         curvature = cross / np.hypot(d1[..., 0], d1[..., 1]) ** 3
@@ -288,9 +256,6 @@ class SplinePath:
         >>> SplinePath([(0.0, 0.0), (2.0, 0.0)]).pose(0.5)
         array([0.5, 0. , 0. ])
         """
-        if _is_finite_float(s):
-            x, y, dx, dy, _, _ = self._scalar_evaluate(self._t_one(s))
-            return np.array([x, y, np.arctan2(dy, dx)])
         point, velocity, _ = self._evaluate(self._t(s))
         heading = np.arctan2(velocity[..., 1], velocity[..., 0])
         return np.concatenate([point, heading[..., None]], axis=-1)
@@ -404,56 +369,33 @@ class SplinePath:
         )
         return float(s[0]) if single else s
 
-    def _track(self, x: float, y: float, s_hint: float, window: float) -> float:
-        """Return ``project((x, y), s_hint, window)`` for floats (the follower's 50 Hz call).
-
-        The same window and validation as ``project``, without its array handling.
-        """
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
-        if not window > 0.0:
-            raise ValueError(f"SplinePath.project: window must be > 0 m, got {window}")
-        centre = min(max(s_hint, 0.0), self.length)
-        lo, hi = max(0.0, centre - window), min(self.length, centre + window)
-        return float(_project_points(np.array([x]), np.array([y]), lo, hi,
-                                     *self._projection_tables)[0])
-
-    def _pose_and_curvature(self, s: float) -> tuple[float, float, float, float]:
-        """Return ``(*pose(s), curvature(s))`` for one finite float ``s``, one evaluation.
-
-        The expressions of ``pose`` and ``curvature``, so the same values to the last bit.
-        """
-        x, y, dx, dy, ddx, ddy = self._scalar_evaluate(self._t_one(s))
-        # numpy's atan2, hypot and power, not math's: they round differently in the last bit.
-        heading = float(np.arctan2(dy, dx))
-        return x, y, heading, float((dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3)
-
 
 def _evaluate_cubic(
     breaks: np.ndarray, coefficients: np.ndarray, x: ArrayLike
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Evaluate a piecewise cubic (scipy ``PPoly`` layout) and its two derivatives.
+    """Evaluate a piecewise cubic (``(4, pieces, columns)``, scipy's ``PPoly`` layout) at ``x``.
 
-    One fused Horner pass: several times cheaper than three ``PPoly`` calls, which
-    matters in the 50 Hz follower loop. ``x`` outside the breaks extrapolates the end
-    pieces (callers clamp first).
+    Returns the value and the first and second derivatives, each of shape
+    ``x.shape + (columns,)``, from one compiled pass (:func:`_cubic_rows`) whatever the
+    size of ``x``: the follower's single ``s`` as well as a whole table. ``x`` outside the
+    breaks extrapolates the end pieces (callers clamp first).
     """
     x = np.asarray(x, dtype=float)
-    piece = np.searchsorted(breaks, x, side="right") - 1
-    piece = np.minimum(np.maximum(piece, 0), breaks.size - 2)
-    h = x - breaks[piece]
-    c3, c2, c1, c0 = coefficients[:, piece]
-    if coefficients.ndim == 3:  # vector-valued: broadcast h over the trailing axis
-        h = h[..., None]
-    value = ((c3 * h + c2) * h + c1) * h + c0
-    first = (3.0 * c3 * h + 2.0 * c2) * h + c1
-    second = 6.0 * c3 * h + 2.0 * c2
-    return value, first, second
+    value, first, second = _cubic_rows(breaks, coefficients, np.ascontiguousarray(x.ravel()))
+    shape = (*x.shape, coefficients.shape[2])
+    return value.reshape(shape), first.reshape(shape), second.reshape(shape)
 
 
-def _is_finite_float(s: object) -> bool:
-    """Return whether ``s`` is one finite float (or int), the case of the scalar fast paths."""
-    return isinstance(s, float | int) and not isinstance(s, bool) and math.isfinite(s)
+def _cubic_table(cubic) -> tuple[np.ndarray, np.ndarray]:
+    """Return a scipy piecewise cubic's breaks and ``(4, pieces, columns)`` coefficients.
+
+    Plain contiguous arrays: scipy's ``PPoly`` attribute access is slow enough to matter
+    at 50 Hz, and the compiled kernels read one layout for scalar and vector cubics.
+    """
+    coefficients = np.asarray(cubic.c, dtype=float)
+    if coefficients.ndim == 2:
+        coefficients = coefficients[:, :, None]
+    return np.ascontiguousarray(cubic.x, dtype=float), np.ascontiguousarray(coefficients)
 
 
 def _table_nodes(knot_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -477,8 +419,9 @@ def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
     """Return value, first and second derivative of one piecewise cubic at ``x``.
 
     ``coefficients`` is scipy's ``PPoly`` layout ``(4, pieces, columns)``; the piece is
-    found and clamped as :func:`_evaluate_cubic` finds it, and the same Horner
-    expressions are evaluated, so the results agree to the last bit.
+    the last one starting at or before ``x`` (clamped to the first and last), evaluated
+    by Horner's rule. The one evaluation of the path's cubics: the projection calls it,
+    and :func:`_cubic_rows` for every other query.
 
     Examples
     --------
@@ -503,6 +446,29 @@ def _cubic_at(breaks, coefficients, x, column):  # pragma: no cover - compiled
     value = ((c3 * h + c2) * h + c1) * h + c0
     first = (3.0 * c3 * h + 2.0 * c2) * h + c1
     second = 6.0 * c3 * h + 2.0 * c2
+    return value, first, second
+
+
+@numba.njit(cache=True)
+def _cubic_rows(breaks, coefficients, x):  # pragma: no cover - compiled
+    """Return :func:`_cubic_at` at every ``x``, every column: three ``(x.size, columns)`` arrays.
+
+    Examples
+    --------
+    >>> breaks = np.array([0.0, 1.0, 2.0])
+    >>> coefficients = np.zeros((4, 2, 1))
+    >>> coefficients[2:, :, 0] = [[1.0, 1.0], [0.0, 1.0]]  # the line y = x
+    >>> value, first, second = _cubic_rows(breaks, coefficients, np.array([0.5, 1.5]))
+    >>> value.ravel().tolist(), first.ravel().tolist(), second.ravel().tolist()
+    ([0.5, 1.5], [1.0, 1.0], [0.0, 0.0])
+    """
+    count, columns = x.size, coefficients.shape[2]
+    value = np.empty((count, columns))
+    first, second = np.empty((count, columns)), np.empty((count, columns))
+    for i in range(count):
+        for column in range(columns):
+            value[i, column], first[i, column], second[i, column] = _cubic_at(
+                breaks, coefficients, x[i], column)
     return value, first, second
 
 

@@ -222,17 +222,6 @@ class WheelEncoders:
         self._last_deltas = (0, 0)
         self.last_tick_deltas = np.zeros(2, dtype=np.int64)
 
-    def wheel_travel(self, tick_deltas: ArrayLike) -> np.ndarray:
-        """Return the nominal wheel travel ``(left, right)`` in metres for tick counts.
-
-        Examples
-        --------
-        >>> from robots.presets import PIONEER3DX
-        >>> WheelEncoders(PIONEER3DX, np.random.default_rng(0)).wheel_travel([19150, 0]).round(6)
-        array([0.612611, 0.      ])
-        """
-        return np.asarray(tick_deltas, dtype=float) * self.spec.metres_per_tick
-
     def odometry_increment(self, wheel_angles: ArrayLike) -> np.ndarray:
         """Read the encoders and return the increment ``(dx, dy, dtheta)`` since the last read.
 
@@ -262,7 +251,6 @@ class WheelEncoders:
         self._ticks = ticks
         self._last_deltas = (left_ticks, right_ticks)
         self.last_tick_deltas = np.array(self._last_deltas, dtype=np.int64)
-        # Python floats, the same operations as wheel_travel and arc_increment on arrays.
         left = left_ticks * self._metres_per_tick
         right = right_ticks * self._metres_per_tick
         sigma = self.slip_sigma
@@ -272,22 +260,6 @@ class WheelEncoders:
             left = left + sigma * math.sqrt(abs(left)) * left_noise
             right = right + sigma * math.sqrt(abs(right)) * right_noise
         return np.array(_arc_increment(left, right, self.spec.wheel_separation))
-
-    def wheel_variances(self, tick_deltas: ArrayLike) -> np.ndarray:
-        """Return the variances (m^2) of the measured ``(left, right)`` wheel travels.
-
-        Slip: ``sigma**2 * |d| * 1 m``; quantisation: ``(metres per tick)**2 / 6``.
-
-        Examples
-        --------
-        >>> from robots.presets import PIONEER3DX
-        >>> encoders = WheelEncoders(PIONEER3DX, np.random.default_rng(0))
-        >>> np.sqrt(encoders.wheel_variances([31260, 0])).round(6)  # 1 m and 0 m of travel
-        array([5.0e-04, 1.3e-05])
-        """
-        travel = self.wheel_travel(tick_deltas)
-        quantisation = self.spec.metres_per_tick**2 / 6.0
-        return self.slip_sigma**2 * np.abs(travel) + quantisation
 
     def increment_covariance(self, tick_deltas: ArrayLike) -> np.ndarray:
         """Return the ``3 x 3`` covariance of the increment measured from ``tick_deltas``.
@@ -330,7 +302,7 @@ class WheelEncoders:
         left = left_ticks * self._metres_per_tick
         right = right_ticks * self._metres_per_tick
         jacobian = arc_increment_jacobian(left, right, self.spec.wheel_separation)
-        # wheel_variances on floats: slip * |travel| + quantisation.
+        # Per wheel: slip * |travel| + quantisation (the module docstring's model).
         slip = self.slip_sigma**2
         quantisation = self._quantisation_variance
         variances = np.array([slip * abs(left) + quantisation, slip * abs(right) + quantisation])

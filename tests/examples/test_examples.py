@@ -21,6 +21,7 @@ def test_every_example_is_tested():
     ]
 
 
+@pytest.mark.slow
 def test_a_box_pushed_mid_lap_is_first_kept_then_replaced(capsys):
     script = example("box_pushed_mid_lap")
     assert script["main"](["--laps", "2", "--push-at", "1.0"]) == 0
@@ -51,6 +52,7 @@ def test_a_custom_policy_is_compared_with_the_bundled_ones(capsys):
     assert short["collisions"] == conservative["collisions"] == 0
 
 
+@pytest.mark.slow
 def test_the_speed_and_zone_observer_sees_the_stop_for_the_person(tmp_path, capsys):
     script = example("speed_and_zone")
     out = tmp_path / "speed.png"

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from robots.ekf import EKFLocalizer, EKFParams, _positive_definite
+from robots.ekf import EKFLocalizer, EKFParams
 from robots.landmarks import LandmarkObservation, range_bearing_model
 from semistatic.frames import compose, wrap_angle
 from tests.robots.test_ekf import DT, MOUNT, POSTS, observe, true_increments
@@ -128,6 +128,7 @@ def biased_runs():
 # ---------------------------------------------------------------- acceptance: consistency
 
 
+@pytest.mark.slow
 def test_without_a_bias_state_the_range_bias_makes_the_filter_overconfident(biased_runs):
     stats = summary(biased_runs["three"])
     report("3-state, biased laser", stats)
@@ -137,6 +138,7 @@ def test_without_a_bias_state_the_range_bias_makes_the_filter_overconfident(bias
     assert stats["normalised_rms"][:2].max() > 1.5
 
 
+@pytest.mark.slow
 def test_with_a_bias_state_the_filter_is_consistent_and_finds_the_bias(biased_runs):
     results = biased_runs["four"]
     stats = summary(results)
@@ -164,6 +166,7 @@ def test_with_a_bias_state_the_filter_is_consistent_and_finds_the_bias(biased_ru
     assert low <= np.mean(full_nees) <= high
 
 
+@pytest.mark.slow
 def test_with_a_bias_state_the_pose_is_more_accurate_under_a_bias(biased_runs):
     three = summary(biased_runs["three"])["rmse_xy"]
     four = summary(biased_runs["four"])["rmse_xy"]
@@ -171,6 +174,7 @@ def test_with_a_bias_state_the_pose_is_more_accurate_under_a_bias(biased_runs):
     assert four < 0.75 * three
 
 
+@pytest.mark.slow
 def test_with_zero_true_bias_four_states_are_as_accurate_as_three():
     three = summary(monte_carlo(THREE_STATE, zero_bias=True, runs=30))
     four = summary(monte_carlo(FOUR_STATE, zero_bias=True, runs=30))
@@ -181,6 +185,7 @@ def test_with_zero_true_bias_four_states_are_as_accurate_as_three():
         assert stats["low"] <= stats["mean_nees"].mean() <= stats["high"]
 
 
+@pytest.mark.slow
 def test_a_drifting_bias_is_tracked_with_its_random_walk_and_lost_without():
     walk, runs, steps = 0.002, 20, 300
     z = {}
@@ -349,16 +354,30 @@ def test_broken_four_state_covariance_is_repaired():
     assert ekf.range_bias_sigma == pytest.approx(BIAS_SIGMA)
 
 
-def test_positive_definite_check_agrees_with_the_eigenvalues():
+@pytest.mark.parametrize("params", [THREE_STATE, FOUR_STATE], ids=["three", "four"])
+def test_a_positive_definite_covariance_is_kept_and_any_other_repaired(params):
+    """The positive-definiteness check against the eigenvalues, through ``initialize``."""
     rng = np.random.default_rng(22)
-    for size in (3, 4):
-        for _ in range(300):
-            root = rng.normal(size=(size, size))
-            shift = rng.uniform(-1.0, 1.0)
-            matrix = root @ root.T + shift * np.eye(size)
-            smallest = np.linalg.eigvalsh(matrix).min()
-            if abs(smallest) > 1e-9:
-                assert _positive_definite(matrix) == (smallest > 0.0)
+    kept = repaired = 0
+    for _ in range(300):
+        root = rng.normal(size=(3, 3))
+        matrix = root @ root.T + rng.uniform(-1.0, 1.0) * np.eye(3)
+        smallest = np.linalg.eigvalsh(matrix).min()
+        if abs(smallest) <= 1e-9:
+            continue
+        ekf = EKFLocalizer(POSTS, params)
+        ekf.initialize(np.zeros(3), matrix)
+        pose_cov = ekf.state_covariance[:3, :3]
+        if smallest > 0.0:
+            np.testing.assert_array_equal(pose_cov, matrix)
+            kept += 1
+        else:
+            assert not np.array_equal(pose_cov, matrix)
+            np.testing.assert_array_equal(pose_cov, pose_cov.T)
+            assert np.linalg.eigvalsh(pose_cov).min() > 0.0
+            repaired += 1
+    assert kept > 50
+    assert repaired > 50
 
 
 @pytest.mark.parametrize(

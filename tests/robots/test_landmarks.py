@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 
 from robots import landmarks as landmarks_module
 from robots.landmarks import (
@@ -16,9 +17,6 @@ from robots.landmarks import (
 )
 from semistatic.frames import compose, transform_points, wrap_angle
 from semistatic.types import Scan
-from tests.robots.landmarks_reference import _centre_bearing as reference_centre_bearing
-from tests.robots.landmarks_reference import _centre_range as reference_centre_range
-from tests.robots.landmarks_reference import detect_landmarks_reference
 
 POST_RADIUS = 0.04
 POST_REMISSION = 0.95
@@ -385,70 +383,174 @@ def test_association_of_nothing_is_empty():
     assert associate_landmarks(obs, np.zeros((0, 2)), np.zeros(3), np.eye(3)) == []
 
 
-# ---------------------------------------------------- batched detection vs the reference
+# ---------------------------------------------------- detection against GEOS and by hand
+#
+# Which beams hit which post is GEOS's answer (shapely rays against the posts' circles and
+# the walls), not cast_scan's; where a post is is known. Noise-free ranges let the
+# centre estimate lock onto the true centre; a one-beam post is computed by hand.
 
-# Relative agreement of the batched estimates with the per-group reference: they differ
-# only in the rounding of sums (padding changes numpy's pairwise order, the angle
-# difference identities replace sin(a - b)); the observed worst case is ~2e-13.
-BATCH_RTOL = 1e-11
+
+def post_beams(sensor_pose, posts, walls, angles=LMS100_ANGLES, range_max=20.0):
+    """Return, per post, the beams whose ray meets that post before anything else (GEOS)."""
+    x, y, theta = sensor_pose
+    ends = np.column_stack(
+        [x + range_max * np.cos(angles + theta), y + range_max * np.sin(angles + theta)]
+    )
+    rays = shapely.linestrings(np.stack([np.broadcast_to([x, y], ends.shape), ends], axis=1))
+    origin = shapely.Point(x, y)
+    # 1024-gons: within 2e-7 m of the circle, far below any beam's miss distance here.
+    circles = [shapely.Point(p).buffer(POST_RADIUS, quad_segs=256) for p in posts]
+    obstacles = circles + [shapely.LineString(wall) for wall in walls]
+    distances = np.full((len(obstacles), angles.size), np.inf)
+    for row, obstacle in enumerate(obstacles):
+        shapely.prepare(obstacle)
+        meets = np.flatnonzero(shapely.intersects(obstacle, rays))
+        hits = shapely.intersection(rays[meets], obstacle)
+        distances[row, meets] = shapely.distance(origin, hits)
+    first = np.argmin(distances, axis=0)
+    hit = np.isfinite(distances.min(axis=0))
+    return [np.flatnonzero(hit & (first == index)) for index in range(len(posts))]
 
 
-def reference_scenes():
-    """The scans of the tests above: random rooms at three noise levels and the specials."""
+def true_range_bearing(sensor_pose, post):
+    rel = np.asarray(post, dtype=float) - np.asarray(sensor_pose[:2])
+    return float(np.hypot(*rel)), wrap_angle(math.atan2(rel[1], rel[0]) - sensor_pose[2])
+
+
+def scenes(rng, count, range_sigma):
+    """Random rooms of 8 posts: (scan, posts, sensor pose)."""
+    for _ in range(count):
+        posts, pose = random_scene(rng, num_posts=8)
+        yield cast_scan(pose, posts, ROOM, range_sigma=range_sigma, rng=rng), posts, pose
+
+
+@pytest.mark.parametrize("range_sigma", [0.0, 0.005, 0.012])
+def test_each_post_takes_exactly_the_beams_geos_says_hit_it(range_sigma):
     rng = np.random.default_rng(42)
-    for range_sigma in (0.0, 0.005, 0.012):
-        for _ in range(25):
-            posts, pose = random_scene(rng, num_posts=8)
-            yield cast_scan(pose, posts, ROOM, range_sigma=range_sigma, rng=rng), range_sigma
-    yield cast_scan((0.0, 0.0, 0.0), [(2.0, 0.0), (5.0, 0.1)], ROOM), 0.0
-    strip = [((3.0, -0.5), (3.0, 0.5))]
-    yield cast_scan((0.0, 0.0, 0.0), [(2.0, 2.0)], ROOM, reflective_walls=strip), 0.0
-    # A post at arm's length covers ~20 beams beside far ones with 1-2: ragged groups.
-    yield cast_scan((0.0, 0.0, 0.0), [(0.3, 0.0), (6.0, 2.0), (8.0, -3.0)], ROOM), 0.0
-
-
-def test_batched_detection_returns_the_reference_observations():
     checked = 0
-    for scan, range_sigma in reference_scenes():
+    for scan, posts, pose in scenes(rng, 25, range_sigma):
+        beams = post_beams(pose, posts, ROOM)
         for kwargs in ({"range_sigma": max(range_sigma, 1e-3)}, {"range_sigma": 0.0}):
-            fast = detect_landmarks(scan, **kwargs)
-            slow = detect_landmarks_reference(scan, **kwargs)
-            assert len(fast) == len(slow)
-            for ours, theirs in zip(fast, slow, strict=True):
-                np.testing.assert_array_equal(ours.beam_indices, theirs.beam_indices)
-                assert ours.range == pytest.approx(theirs.range, rel=BATCH_RTOL)
-                assert ours.bearing == pytest.approx(theirs.bearing, rel=0, abs=BATCH_RTOL)
-                scale = np.max(np.abs(theirs.covariance))
-                np.testing.assert_allclose(
-                    ours.covariance, theirs.covariance, rtol=0, atol=BATCH_RTOL * scale
-                )
+            observations = detect_landmarks(scan, **kwargs)
+            nearest, errors = centre_errors(observations, posts, pose)
+            assert np.all(errors < 0.1)
+            for obs, index in zip(observations, nearest, strict=True):
+                np.testing.assert_array_equal(obs.beam_indices, beams[index])
                 checked += 1
-    assert checked > 300
+    assert checked > 100
 
 
-def test_min_beams_and_an_empty_bearing_interval_match_the_reference():
-    # A one-beam post: its feasible bearing interval collapses to a point (zero variance).
-    scan = cast_scan((0.0, 0.0, 0.0), [(8.0, 0.0), (3.0, 1.0)], ROOM)
-    for min_beams in (1, 2, 5):
-        fast = detect_landmarks(scan, min_beams=min_beams, range_sigma=0.0)
-        slow = detect_landmarks_reference(scan, min_beams=min_beams, range_sigma=0.0)
-        assert [o.beam_indices.tolist() for o in fast] == [o.beam_indices.tolist() for o in slow]
-        for ours, theirs in zip(fast, slow, strict=True):
-            assert (ours.range, ours.bearing) == pytest.approx((theirs.range, theirs.bearing))
-    assert len(detect_landmarks(scan, min_beams=1)) > len(detect_landmarks(scan, min_beams=5))
+def test_noise_free_posts_are_located_at_their_centre():
+    # Precise ranges: the bearing likelihood locks onto the centre, the range follows.
+    # A post hit by one beam only is placed within its feasible interval (below).
+    rng = np.random.default_rng(42)
+    checked = 0
+    for scan, posts, pose in scenes(rng, 40, 0.0):
+        observations = detect_landmarks(scan, range_sigma=0.0)
+        nearest, _ = centre_errors(observations, posts, pose)
+        for obs, index in zip(observations, nearest, strict=True):
+            true_range, true_bearing = true_range_bearing(pose, posts[index])
+            bearing_error = abs(wrap_angle(obs.bearing - true_bearing))
+            if obs.beam_indices.size == 1:
+                # Somewhere in the interval the beam and its neighbours allow.
+                assert bearing_error <= scan.angle_increment
+                assert abs(obs.range - true_range) <= POST_RADIUS
+                continue
+            # Measured: 4e-5 m and 6.5e-4 m across (two beams), less with more beams.
+            assert abs(obs.range - true_range) < 1e-4
+            assert bearing_error * true_range < 1e-3
+            checked += 1
+    assert checked > 100
 
 
-def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_groups():
-    # Groups of 1 to 17 beams in one batch (padding), one with an empty interval; the
-    # compiled passes fed directly (one numpy exp between them, as the detector does).
+@pytest.mark.parametrize(("range_sigma", "bearing_sigma"), [(0.0, 0.0), (0.012, 1e-3)])
+def test_one_beam_post_by_hand(range_sigma, bearing_sigma):
+    # A post 8 m straight ahead hit by the middle beam only (its half-width asin(R / 8)
+    # is 0.29 deg, the beams 0.5 deg apart). The centre bearing may lie where the beam
+    # hits and both neighbours miss: [step - w, w - step] around 0 with w the
+    # half-width, a uniform prior over 41 equally spaced candidates that all fit the one
+    # range exactly: mean 0, variance width^2 (K + 1) / (12 (K - 1)). The range is the
+    # hit plus the radius, with the beam's own variance; no coupling at the centre.
+    step = math.radians(0.5)
+    angles = step * np.arange(-20, 21)
+    ranges, intensities = np.full(angles.size, 12.0), np.full(angles.size, 0.2)
+    ranges[20], intensities[20] = 8.0 - POST_RADIUS, 0.95
+    scan = Scan(ranges=ranges, angle_min=angles[0], angle_increment=step,
+                intensities=intensities)
+    [obs] = detect_landmarks(
+        scan, post_radius=POST_RADIUS, range_sigma=range_sigma, bearing_sigma=bearing_sigma
+    )
+    half_width = math.asin(POST_RADIUS / 8.0)
+    width = 2.0 * (step - half_width)
+    candidates = 41
+    bearing_variance = width**2 * (candidates + 1) / (12 * (candidates - 1)) + bearing_sigma**2
+    assert obs.range == pytest.approx(8.0, abs=1e-12)
+    assert obs.bearing == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(
+        obs.covariance,
+        [[range_sigma**2, 0.0], [0.0, bearing_variance]],
+        rtol=1e-9,
+        atol=1e-15,  # the mean lands within 1e-14 rad of 0: a 1e-19 coupling, no more
+    )
+    assert obs.beam_indices.tolist() == [20]
+
+
+def test_min_beams_drops_the_posts_with_fewer_beams():
+    posts = [(8.0, 0.0), (3.0, 1.0), (1.0, -1.0)]
+    scan = cast_scan((0.0, 0.0, 0.0), posts, ROOM)
+    counts = [beams.size for beams in post_beams((0.0, 0.0, 0.0), posts, ROOM)]
+    assert counts[0] == 1 < counts[1] < counts[2]
+    for min_beams in (1, counts[1], counts[1] + 1, counts[2], counts[2] + 1):
+        found = detect_landmarks(scan, min_beams=min_beams, range_sigma=0.0)
+        nearest, errors = centre_errors(found, posts, scan.pose)
+        assert sorted(nearest.tolist()) == [k for k in range(3) if counts[k] >= min_beams]
+        assert np.all(errors < 0.05)
+
+
+def test_posts_in_one_scan_are_estimated_as_if_alone():
+    # One scan, groups of very different sizes (a post at arm's length covers ~20 beams
+    # beside far ones with 1-2) estimated in one batch: each post's estimate is the one
+    # it gets alone in the scan, and near its true centre.
+    posts = [(0.3, 0.0), (6.0, 2.0), (8.0, -3.0), (2.5, -2.0)]
+    together = detect_landmarks(cast_scan((0.0, 0.0, 0.0), posts, ROOM), range_sigma=0.0)
+    nearest, _ = centre_errors(together, posts, (0.0, 0.0, 0.0))
+    assert sorted(nearest.tolist()) == [0, 1, 2, 3]
+    sizes = sorted(obs.beam_indices.size for obs in together)
+    assert sizes[0] <= 2
+    assert sizes[-1] >= 15
+    for obs, index in zip(together, nearest, strict=True):
+        [alone] = detect_landmarks(
+            cast_scan((0.0, 0.0, 0.0), [posts[index]], ROOM), range_sigma=0.0
+        )
+        np.testing.assert_array_equal(obs.beam_indices, alone.beam_indices)
+        assert obs.range == pytest.approx(alone.range, rel=1e-12)
+        assert obs.bearing == pytest.approx(alone.bearing, rel=0, abs=1e-12)
+        np.testing.assert_allclose(obs.covariance, alone.covariance, rtol=1e-9, atol=1e-24)
+
+
+def circle_hits(distance, bearing, offsets):
+    """Return the near-side ranges of beams at ``bearing + offsets`` on a post (closed form)."""
+    along, across = distance * np.cos(offsets), distance * np.sin(offsets)
+    return along - np.sqrt(POST_RADIUS**2 - across**2)
+
+
+def test_compiled_passes_on_ragged_groups_find_the_true_centres():
+    # Groups of 1 to 17 beams in one batch (padding), fed to the compiled passes directly
+    # (one numpy exp between them, as the detector does), with exact ranges of known
+    # posts and the precise-range likelihood: every multi-beam group finds its centre; a
+    # forced empty interval gives its point and only the beams' own bearing variance.
     rng = np.random.default_rng(9)
     sizes = [1, 3, 17, 6, 2]
-    hit_ranges, hit_angles = [], []
+    centres, hit_ranges, hit_angles = [], [], []
     for size in sizes:
-        centre = rng.uniform(-2.0, 2.0)
-        hit_angles.append(centre + 0.008 * (np.arange(size) - (size - 1) / 2))
-        hit_ranges.append(rng.uniform(0.5, 6.0) + rng.normal(0.0, 0.01, size))
-    # The groups side by side in one "scan" (their angles need not be monotonic here).
+        distance = rng.uniform(0.5, 6.0)
+        half_width = math.asin(POST_RADIUS / distance)
+        step = 1.8 * half_width / max(size, 2)
+        offsets = step * (np.arange(size) - (size - 1) / 2) + rng.uniform(-0.2, 0.2) * step
+        bearing = rng.uniform(-2.0, 2.0)
+        centres.append((distance, bearing))
+        hit_angles.append(bearing + offsets)
+        hit_ranges.append(circle_hits(distance, bearing, offsets))
     ranges, angles = np.concatenate(hit_ranges), np.concatenate(hit_angles)
     # Read-only, as a Scan's arrays: the kernels' compiled version for scans serves.
     ranges.flags.writeable = angles.flags.writeable = False
@@ -458,35 +560,29 @@ def test_batched_bearing_and_range_match_the_per_group_reference_on_ragged_group
     lasts_angle = np.array([group[-1] for group in hit_angles])
     # Misses far outside, so the interval is the hits' own ([last - w, first + w]) ...
     distance = np.array([group.min() + POST_RADIUS for group in hit_ranges])
+    floor = 1e-4  # the likelihood sigma of precise ranges (_RANGE_SIGMA_FLOOR)
     lows, highs, candidates, exponents = landmarks_module._bearing_exponents(
         ranges, angles, firsts, counts, firsts_angle, lasts_angle, firsts_angle - 1.0,
-        lasts_angle + 1.0, distance, POST_RADIUS, POST_RADIUS**2, 0.012**2,
+        lasts_angle + 1.0, distance, POST_RADIUS, POST_RADIUS**2, floor**2,
     )
-    # ... except group 3, whose interval collapses to a point.
+    # ... except group 3, whose interval is forced to a point.
     lows[3] = highs[3]
     candidates[3] = highs[3]
     distance, range_variance, cross, bearing, bearing_variance = (
         landmarks_module._centre_estimates(
             ranges, angles, firsts, counts, lows, highs, candidates, np.exp(exponents),
-            POST_RADIUS**2, (0.05 * POST_RADIUS) ** 2, 0.012**2, 1e-6, True,
+            POST_RADIUS**2, (0.05 * POST_RADIUS) ** 2, 0.0, 1e-6, True,
         )
     )
-    for row in range(len(sizes)):
-        mean, variance = reference_centre_bearing(
-            hit_ranges[row], hit_angles[row], lows[row], highs[row], POST_RADIUS, 0.012
-        )
-        assert bearing[row] == pytest.approx(mean, rel=0, abs=1e-12)
-        assert bearing_variance[row] - 1e-6 == pytest.approx(variance, rel=1e-9, abs=1e-18)
-        expected = reference_centre_range(
-            hit_ranges[row],
-            hit_angles[row] - bearing[row],
-            POST_RADIUS,
-            0.012,
-            bearing_variance[row],
-        )
-        assert (distance[row], range_variance[row], cross[row]) == pytest.approx(
-            expected, rel=1e-11
-        )
+    for row, (true_distance, true_bearing) in enumerate(centres):
+        assert lows[row] <= true_bearing <= highs[row] or row == 3
+        if sizes[row] > 1 and row != 3:
+            # To the candidate grid: within half a step of it.
+            grid_step = (highs[row] - lows[row]) / (candidates.shape[1] - 1)
+            assert bearing[row] == pytest.approx(true_bearing, abs=0.5 * grid_step)
+            assert distance[row] == pytest.approx(true_distance, abs=1e-4)
+        assert range_variance[row] >= 0.0
+        assert range_variance[row] * bearing_variance[row] >= cross[row] ** 2
     assert bearing_variance[3] == 1e-6
     assert bearing[3] == lows[3]
 

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from scenarios.process.staging import RESULT_MARKER
 from tests.scenarios.cli_helpers import run_cli
 from tests.scenarios.tiny_world import TINY_SCENARIO, write_tiny
 
 
+@pytest.mark.slow
 def test_a_reused_output_directory_holds_only_the_newest_run(capsys, tmp_path):
     scenario = write_tiny(tmp_path)
     out = tmp_path / "out"

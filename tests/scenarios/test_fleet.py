@@ -145,6 +145,7 @@ def test_route_and_start_time_are_checked(tmp_path):
         load_scenario(path)
 
 
+@pytest.mark.slow
 def test_a_vehicle_drives_its_sub_route_and_waits_for_its_start_time():
     spec = load_scenario("warehouse", overrides=["laps=1", "sharing=false"])
     spec = dataclasses.replace(spec, people=(), moves=(), vehicles=(

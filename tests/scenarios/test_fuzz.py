@@ -141,6 +141,7 @@ def _assert_clean_rejection(status: int, err: str) -> None:
     assert lines[0].startswith("error: "), err
 
 
+@pytest.mark.slow
 @settings(max_examples=VALIDATE_EXAMPLES, derandomize=True, deadline=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(mutant=mutants())

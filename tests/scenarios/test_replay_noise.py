@@ -127,12 +127,18 @@ def test_noise_is_reported_without_auto_noise():
     assert summary["params"]["auto_noise"] is False
 
 
-@pytest.mark.parametrize("noise_scans", [1, 7, 10_000])
-def test_every_scan_is_replayed_whatever_the_noise_sample(noise_scans):
-    # without auto_noise: the sample only measures the noise, it changes no threshold
+@pytest.fixture(scope="module")
+def plain_replay():
+    """A synthetic log and its replay with the default noise sample, without auto_noise."""
     scans = synthetic_log(seed=6)
+    return scans, replay_log(scans, PLAIN).summary()
+
+
+@pytest.mark.parametrize("noise_scans", [1, 7, 10_000])
+def test_every_scan_is_replayed_whatever_the_noise_sample(noise_scans, plain_replay):
+    # without auto_noise: the sample only measures the noise, it changes no threshold
+    scans, reference = plain_replay
     options = dataclasses.replace(PLAIN, noise_scans=noise_scans)
-    reference = replay_log(scans, PLAIN).summary()
     summary = replay_log(iter(scans), options).summary()  # a stream, as open_log gives
     assert summary["scans"] == len(scans)
     assert summary["table1_cm"] == reference["table1_cm"]

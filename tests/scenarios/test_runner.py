@@ -14,11 +14,11 @@ from tests.scenarios.tiny_world import write_tiny
 
 
 @pytest.fixture(scope="module")
-def tiny_runs(tmp_path_factory):
+def tiny_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("tiny")
     path = write_tiny(folder)
     spec = load_scenario(path)
-    return spec, run_scenario(spec), run_scenario(spec)
+    return spec, run_scenario(spec)
 
 
 def without_performance(metrics):
@@ -45,8 +45,8 @@ def test_schedule_next_due_finds_every_step_due_fires(rate, physics):
     assert schedule.next_due(2 * 5000 + 1) > 2 * 5000 + 1
 
 
-def test_tiny_run_completes_its_laps_without_collision(tiny_runs):
-    spec, log, _ = tiny_runs
+def test_tiny_run_completes_its_laps_without_collision(tiny_run):
+    spec, log = tiny_run
     metrics = summarize(log)
     assert metrics["safety"]["laps_completed"] == spec.laps
     assert metrics["safety"]["collisions"] == 0
@@ -59,8 +59,8 @@ def test_tiny_run_completes_its_laps_without_collision(tiny_runs):
     assert 1.0 < localization["nees_mean"] < 10.0
 
 
-def test_tiny_run_maps_the_box_and_nothing_else(tiny_runs):
-    _, log, _ = tiny_runs
+def test_tiny_run_maps_the_box_and_nothing_else(tiny_run):
+    _, log = tiny_run
     metrics = summarize(log)
     assert metrics["detection"]["f1"] >= 0.9
     assert metrics["detection"]["false_objects_from_people"] == 0
@@ -69,17 +69,20 @@ def test_tiny_run_maps_the_box_and_nothing_else(tiny_runs):
     assert table["mean"]["max"] < 10.0  # the paper's bound
 
 
-def test_same_seed_same_metrics_and_maps(tiny_runs):
-    _, first, second = tiny_runs
+@pytest.mark.slow  # a second run; tests/scenarios/test_testbench.py repeats it in other ways
+def test_same_seed_same_metrics_and_maps(tiny_run):
+    spec, first = tiny_run
+    second = run_scenario(spec)
     assert without_performance(summarize(first)) == without_performance(summarize(second))
     assert first.maps_after_lap == second.maps_after_lap
     np.testing.assert_array_equal(np.array(first.true_poses), np.array(second.true_poses))
 
 
-def test_adaptive_policy_does_not_slow_for_the_known_box(tmp_path):
-    path = write_tiny(tmp_path)
-    conservative = summarize(run_scenario(load_scenario(path)))
-    adaptive = summarize(run_scenario(load_scenario(path, overrides=["policy=adaptive"])))
+def test_adaptive_policy_does_not_slow_for_the_known_box(tiny_run):
+    spec, log = tiny_run
+    assert spec.policy == "conservative"
+    conservative = summarize(log)
+    adaptive = summarize(run_scenario(load_scenario(spec.source, overrides=["policy=adaptive"])))
     # Lap 1 knows nothing yet; from lap 2 on the carton is a known semi-static object.
     assert adaptive["safety"]["slowed_time_s"][1] < conservative["safety"]["slowed_time_s"][1]
     assert adaptive["safety"]["lap_time_s"][1] < conservative["safety"]["lap_time_s"][1]

@@ -1,6 +1,7 @@
 """Segment maps published as the vehicle drives: what is sent, its size, no effect on the run."""
 
 import numpy as np
+import pytest
 
 from scenarios.bench.runner import run_scenario
 from scenarios.bench.sharing import SegmentPublisher
@@ -9,6 +10,7 @@ from scenarios.results.outputs import summarize
 from scenarios.spec.load import load_scenario
 
 
+@pytest.mark.slow
 def test_publisher_sends_each_segment_map_once_per_pass_and_changes_nothing():
     spec = load_scenario("pal1", overrides=["laps=1"])
     publisher = SegmentPublisher()

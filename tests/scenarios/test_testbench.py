@@ -109,6 +109,7 @@ def test_run_lap_returns_each_lap_and_state_is_readable_between(tiny_spec, tiny_
         assert_same_run(bench.run(), tiny_log)
 
 
+@pytest.mark.slow  # two more runs of the tiny world
 def test_reset_with_a_seed_starts_over_with_other_noise(tiny_spec, tiny_log):
     with Testbench(tiny_spec) as bench:
         bench.reset(seed=tiny_spec.seed + 1)
@@ -145,6 +146,7 @@ def code_world() -> WorldSpec:
                      people=(), path=path)
 
 
+@pytest.mark.slow  # another run of the tiny world, to the last bit
 def test_a_world_built_in_code_runs_like_its_file(tiny_spec, tiny_log):
     with Testbench(tiny_spec, world=code_world()) as bench:
         log = bench.run()
@@ -337,6 +339,7 @@ class RandomPusher(Observer):
         self.draws += 16
 
 
+@pytest.mark.slow  # another run of the tiny world, to the last bit
 def test_a_script_drawing_random_numbers_leaves_the_robots_noise_alone(tiny_spec, tiny_log):
     pusher = RandomPusher()
     with Testbench(tiny_spec) as bench:

@@ -317,6 +317,7 @@ def tiny_sweep(tmp_path_factory):
     return {"status": status, "out": out, "direct": direct, "finished": finished}
 
 
+@pytest.mark.slow
 def test_sweep_writes_its_outputs(tiny_sweep):
     assert tiny_sweep["status"] == 0
     out = tiny_sweep["out"]
@@ -342,6 +343,7 @@ def test_sweep_writes_its_outputs(tiny_sweep):
     assert png.stat().st_size > 20_000
 
 
+@pytest.mark.slow
 def test_sweep_prints_the_ranked_table_and_best_point(tiny_sweep):
     data = json.loads((tiny_sweep["out"] / "sweep.json").read_text())
     text = format_ranking(data, tiny_sweep["out"])
@@ -350,6 +352,7 @@ def test_sweep_prints_the_ranked_table_and_best_point(tiny_sweep):
     assert text.splitlines()[2].split()[:2] == ["1", str(best)]
 
 
+@pytest.mark.slow
 def test_results_do_not_depend_on_the_number_of_workers(tiny_sweep):
     direct = tiny_sweep["direct"]
     assert [r.point.index for r in direct] == [0, 1]

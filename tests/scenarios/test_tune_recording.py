@@ -23,7 +23,10 @@ RECORDED = ["laps=2", "mapper.gate=0.12"]
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    """pal1, 2 laps, recorded: (recording directory, the run's metrics, the run's log)."""
+    """pal1, 2 laps, recorded: (recording directory, the run's metrics, the run's log).
+
+    A closed-loop run of a bundled scenario: the tests that use it are slow.
+    """
     spec = load_scenario("pal1", overrides=RECORDED)
     recorder = ScanRecorder()
     log = run_scenario(spec, observers=(recorder,))
@@ -37,6 +40,7 @@ def mapper_results(metrics):
     return metrics["table1_cm"], metrics["detection"]
 
 
+@pytest.mark.slow
 def test_recording_holds_every_safety_scan_in_float64(recorded):
     path, metrics, log = recorded
     recording = read_recording(path)
@@ -61,6 +65,7 @@ def test_replay_at_other_thresholds_equals_full_resimulation(recorded):
     assert replayed["safety"] == simulated["safety"]
 
 
+@pytest.mark.slow
 def test_replay_at_the_recorded_thresholds_gives_the_recorded_metrics(recorded):
     path, metrics, _ = recorded
     replayed = replay_recording(read_recording(path), load_scenario("pal1", overrides=RECORDED))
@@ -78,6 +83,7 @@ def test_motion_changes_name_the_field():
     assert motion_changes(adaptive, changed) == ("mapper",)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("options", "fragments"),
     [
@@ -103,6 +109,7 @@ def test_tune_refuses_what_a_recording_cannot_replay(recorded, tmp_path, capsys,
     assert (out / "keep.txt").read_text() == "old"
 
 
+@pytest.mark.slow
 def test_tune_refuses_another_scenario_and_other_versions(recorded, tmp_path, capsys):
     path, _, _ = recorded
     status, _, err = run_cli(capsys, "tune", "sim1", "--recording", path,
@@ -122,6 +129,7 @@ def test_tune_refuses_another_scenario_and_other_versions(recorded, tmp_path, ca
     assert not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("scenarios", "options", "fragments"),
     [
@@ -143,6 +151,7 @@ def test_several_scenarios_need_a_search_and_a_recording_each(recorded, tmp_path
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_tune_from_a_recording_ranks_replayed_points(recorded, tmp_path, capsys):
     path, metrics, _ = recorded
     out = tmp_path / "tune"

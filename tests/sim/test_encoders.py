@@ -10,7 +10,6 @@ from semistatic.frames import compose
 from sim.client import SimClient
 from sim.encoders import WheelEncoders, arc_increment, arc_increment_jacobian
 from sim.ugv import SimUGV, add_floor
-from tests.sim.encoders_reference import ReferenceEncoders, reference_arc_increment_jacobian
 
 ALL_PRESETS = sorted(PRESETS.values(), key=lambda spec: spec.name)
 
@@ -170,13 +169,6 @@ def test_covariance_is_symmetric_semi_definite_of_rank_two():
     assert np.linalg.matrix_rank(covariance) == 2
 
 
-def test_covariance_at_rest_is_only_quantisation():
-    encoders = WheelEncoders(PIONEER3DX, np.random.default_rng(0))
-    variances = encoders.wheel_variances([0, 0])
-    np.testing.assert_allclose(variances, PIONEER3DX.metres_per_tick**2 / 6)
-    assert encoders.increment_covariance([0, 0])[0, 0] > 0.0
-
-
 def test_noise_does_not_depend_on_the_odometry_rate():
     """The variance of a wheel's travel grows with distance, not with the number of reads."""
     spec = PIONEER3DX.replace(encoder_slip_sigma=0.01)
@@ -252,28 +244,126 @@ def test_noise_free_odometry_tracks_the_physics_closely():
     assert error / distance < 0.001
 
 
+# --- against closed-form differential-drive odometry ------------------------------------
+#
+# The reference below shares nothing with sim.encoders but the documented model: ticks are
+# floor(angle N / 2 pi), a wheel rolls ticks * 2 pi r / N plus slip noise
+# sigma sqrt(|d|) n (two standard normals per reading, left then right), and the body
+# moves on the circle those two distances describe. The circle is written as a radius
+# and an angle (R sin(phi), R (1 - cos(phi)) = 2 R sin^2(phi / 2)), not as the chord and
+# sinc the code uses; its covariance uses a numerical Jacobian.
+
+
+def closed_form_arc(left, right, track):
+    """Return the pose after rolling ``left`` and ``right`` metres on a circle (or a line)."""
+    phi = (right - left) / track
+    if phi == 0.0:
+        return np.array([0.5 * (left + right), 0.0, 0.0])
+    radius = 0.5 * (left + right) / phi  # of the wheel base's centre; 0 turning on the spot
+    return np.array([radius * math.sin(phi), 2.0 * radius * math.sin(0.5 * phi) ** 2, phi])
+
+
+def closed_form_covariance(left, right, track, variances, step=1e-7):
+    """Return J diag(variances) J^T with J the central-difference Jacobian of the arc."""
+    jacobian = np.column_stack(
+        [
+            (
+                closed_form_arc(left + step, right, track)
+                - closed_form_arc(left - step, right, track)
+            )
+            / (2 * step),
+            (
+                closed_form_arc(left, right + step, track)
+                - closed_form_arc(left, right - step, track)
+            )
+            / (2 * step),
+        ]
+    )
+    return jacobian @ np.diag(variances) @ jacobian.T
+
+
+@pytest.mark.parametrize(
+    ("left_ticks", "right_ticks", "expected"),
+    [
+        # 1000 ticks a wheel is 1000 * 2 pi r / N metres: straight, forward and back.
+        (1000, 1000, lambda d, b: (d, 0.0, 0.0)),
+        (-700, -700, lambda d, b: (-0.7 * d, 0.0, 0.0)),
+        # Opposite wheels: on the spot by 2 d / b.
+        (-1000, 1000, lambda d, b: (0.0, 0.0, 2.0 * d / b)),
+        (1000, -1000, lambda d, b: (0.0, 0.0, -2.0 * d / b)),
+        # One wheel still: a circle of radius b / 2 about the still wheel.
+        (0, 1000, lambda d, b: (0.5 * b * math.sin(d / b), 0.5 * b * (1 - math.cos(d / b)), d / b)),
+        (
+            1000,
+            0,
+            lambda d, b: (0.5 * b * math.sin(d / b), -0.5 * b * (1 - math.cos(d / b)), -d / b),
+        ),
+    ],
+    ids=["straight", "backwards", "spot-left", "spot-right", "pivot-left", "pivot-right"],
+)
 @pytest.mark.parametrize("spec", ALL_PRESETS, ids=lambda spec: spec.name)
-def test_float_fast_path_is_the_array_code_to_the_last_bit(spec):
-    # Odometry on Python floats must not change a single bit of an increment or of its
-    # covariance against the array code it replaced, slip noise included.
-    spec = spec.replace(encoder_slip_sigma=0.02)
-    fast = WheelEncoders(spec, np.random.default_rng(5))
-    reference = ReferenceEncoders(spec, np.random.default_rng(5))
+def test_tick_counts_give_the_closed_form_motion(spec, left_ticks, right_ticks, expected):
+    encoders = WheelEncoders(spec, np.random.default_rng(0), noise_free=True)
+    per_tick = 2.0 * math.pi / spec.encoder_ticks_per_rev  # wheel angle of one tick
+    # Half a tick past each count: floor() lands on the count whatever the rounding.
+    encoders.reset([0.5 * per_tick, 0.5 * per_tick])
+    increment = encoders.odometry_increment(
+        [(left_ticks + 0.5) * per_tick, (right_ticks + 0.5) * per_tick]
+    )
+    assert encoders.last_tick_deltas.tolist() == [left_ticks, right_ticks]
+    metres = 1000 * per_tick * spec.wheel_radius
+    np.testing.assert_allclose(
+        increment, expected(metres, spec.wheel_separation), rtol=1e-12, atol=1e-15
+    )
+
+
+def test_covariance_at_rest_by_hand():
+    # At rest the arc's Jacobian is [[1/2, 1/2], [0, 0], [-1/b, 1/b]]: each wheel's
+    # quantisation variance q = (2 pi r / N)^2 / 6 reaches x by a quarter and theta by 1/b^2.
+    spec = PIONEER3DX
+    quantisation = (2 * math.pi * spec.wheel_radius / spec.encoder_ticks_per_rev) ** 2 / 6
+    b = spec.wheel_separation
+    expected = quantisation * np.diag([0.5, 0.0, 2.0 / b**2])
+    covariance = WheelEncoders(spec, np.random.default_rng(0)).increment_covariance([0, 0])
+    np.testing.assert_allclose(covariance, expected, rtol=1e-12, atol=1e-12 * expected.max())
+
+
+@pytest.mark.parametrize("spec", ALL_PRESETS, ids=lambda spec: spec.name)
+def test_noisy_odometry_is_the_closed_form_arc_of_the_noisy_travel(spec):
+    # Straight, turning, on the spot, standing still and backwards, slip noise on: every
+    # increment and covariance against the closed form fed the same documented draws.
+    sigma = 0.02
+    spec = spec.replace(encoder_slip_sigma=sigma)
+    encoders = WheelEncoders(spec, np.random.default_rng(5))
+    draws = np.random.default_rng(5)  # the same stream, drawn as documented
     rng = np.random.default_rng(6)
+    ticks_per_radian = spec.encoder_ticks_per_rev / (2 * math.pi)
+    metres_per_tick = 2 * math.pi * spec.wheel_radius / spec.encoder_ticks_per_rev
+    quantisation = metres_per_tick**2 / 6
     angles = np.array([3.0, -1.5])
-    fast.reset(angles)
-    reference.reset(angles)
+    encoders.reset(angles)
+    counts = [math.floor(a * ticks_per_radian) for a in angles]
     for tick in range(400):
-        # Straight, turning, on the spot, standing still and backwards.
         left, right = [(0.2, 0.2), (0.1, 0.3), (-0.2, 0.2), (0.0, 0.0), (-0.1, -0.12)][tick % 5]
         angles = angles + np.array([left, right]) + rng.normal(0.0, 0.01, 2)
-        increment = fast.odometry_increment(angles)
-        np.testing.assert_array_equal(increment, reference.odometry_increment(angles))
-        np.testing.assert_array_equal(fast.last_tick_deltas, reference.last_tick_deltas)
-        covariance = fast.increment_covariance(fast.last_tick_deltas)
-        expected = reference.increment_covariance(reference.last_tick_deltas)
-        np.testing.assert_array_equal(covariance, expected)
+        increment, covariance = encoders.read(angles)
+
+        now = [math.floor(a * ticks_per_radian) for a in angles]
+        deltas = [now[0] - counts[0], now[1] - counts[1]]
+        counts = now
+        assert encoders.last_tick_deltas.tolist() == deltas
+        nominal = [delta * metres_per_tick for delta in deltas]
+        noise = draws.standard_normal(2)
+        travel = [d + sigma * math.sqrt(abs(d)) * n for d, n in zip(nominal, noise, strict=True)]
+        expected = closed_form_arc(*travel, spec.wheel_separation)
+        np.testing.assert_allclose(increment, expected, rtol=1e-11, atol=1e-14)
+
+        variances = [sigma**2 * abs(d) + quantisation for d in nominal]
+        reference = closed_form_covariance(*nominal, spec.wheel_separation, variances)
+        # Central differences carry ~1e-9 relative error into the Jacobian.
+        np.testing.assert_allclose(
+            covariance, reference, rtol=1e-6, atol=1e-8 * np.abs(reference).max()
+        )
         np.testing.assert_array_equal(
-            arc_increment_jacobian(*increment[:2], spec.wheel_separation),
-            reference_arc_increment_jacobian(*increment[:2], spec.wheel_separation),
+            covariance, encoders.increment_covariance(encoders.last_tick_deltas)
         )
