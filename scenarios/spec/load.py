@@ -74,8 +74,9 @@ def bundled_scenarios() -> tuple[str, ...]:
 
     Examples
     --------
-    >>> bundled_scenarios()
-    ('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet')
+    >>> bundled_scenarios()  # doctest: +NORMALIZE_WHITESPACE
+    ('occlusion_hall', 'pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse',
+     'warehouse_fleet', 'warehouse_occlusion')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 
@@ -89,8 +90,8 @@ def scenario_help() -> str:
 
     Examples
     --------
-    >>> scenario_help()
-    'bundled name (pal1, pal3a, pal3b, sim1, sim2, warehouse, warehouse_fleet) or a .toml'
+    >>> scenario_help()  # doctest: +ELLIPSIS
+    'bundled name (occlusion_hall, pal1, pal3a, ..., warehouse_occlusion) or a .toml'
     """
     return f"bundled name ({', '.join(bundled_scenarios())}) or a .toml"
 
@@ -119,8 +120,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
-and no such file; bundled: pal1, pal3a, pal3b, sim1, sim2, warehouse, \
-warehouse_fleet
+and no such file; bundled: occlusion_hall, pal1, pal3a, pal3b, sim1, sim2, warehouse, \
+warehouse_fleet, warehouse_occlusion
     """
     text = str(name_or_path)
     names = bundled_scenarios()

@@ -49,18 +49,18 @@ def _tiny_with_world(folder: Path, old: str, new: str) -> Path:
 @pytest.mark.parametrize(
     ("old", "new", "fragments"),
     [
-        ("pose = [2.0, -0.72, 0.0]", "pose = [2.0, -1.1, 0.0]",
+        ("pose = [2.6, -1.0, 0.0]", "pose = [2.6, -1.4, 0.0]",
          ["tiny_world.toml", "boxes[0]", "lap 1", "overlaps walls[0]"]),
-        ("pose = [2.0, -0.72, 0.0]", "pose = [0.0, 0.0, 0.0]",
+        ("pose = [2.6, -1.0, 0.0]", "pose = [0.0, 0.0, 0.0]",
          ["tiny_world.toml", "boxes[0]", "lap 1", "swept robot footprint overlaps"]),
-        ("{ x = -2.0, y = -1.09 }, { x = 0.0, y = -1.09 }, { x = 2.0, y = -1.09 },\n"
-         "    { x = 4.0, y = -1.09 }, { x = 6.0, y = -1.09 },\n"
-         "    { x = -1.0, y = 1.09 }, { x = 1.0, y = 1.09 }, { x = 3.0, y = 1.09 }, "
-         "{ x = 5.0, y = 1.09 },\n    { x = -2.39, y = 0.3 }, { x = 6.39, y = -0.3 },",
-         "{ x = 0.0, y = -1.09 }, { x = 2.0, y = -1.09 },",
+        ("{ x = -2.0, y = -1.39 }, { x = 0.0, y = -1.39 }, { x = 2.0, y = -1.39 },\n"
+         "    { x = 4.0, y = -1.39 }, { x = 6.0, y = -1.39 },\n"
+         "    { x = -1.0, y = 1.39 }, { x = 1.0, y = 1.39 }, { x = 3.0, y = 1.39 }, "
+         "{ x = 5.0, y = 1.39 },\n    { x = -2.39, y = 0.3 }, { x = 6.39, y = -0.3 },",
+         "{ x = 0.0, y = -1.39 }, { x = 2.0, y = -1.39 },",
          ["tiny_world.toml", "posts", "lap 1", "fewer than 3 posts"]),
         ("speed = 0.4", "speed = 1e9", ["tiny_world.toml", "path.speed", "<= 2.0"]),
-        ("{ x = 6.0, y = -1.09 }", "{ x = 6.0e7, y = -1.09 }",
+        ("{ x = 6.0, y = -1.39 }", "{ x = 6.0e7, y = -1.39 }",
          ["tiny_world.toml", "posts[4].x", "<= 1000.0"]),
     ],
     ids=["box-in-wall", "box-on-start", "two-posts", "speed-1e9", "far-post"],

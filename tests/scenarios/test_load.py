@@ -64,7 +64,8 @@ def error_of(name_or_path, overrides=()) -> SpecError:
 
 def test_bundled_scenarios_are_the_table_1_rows():
     assert paper_scenarios() == tuple(sorted(PAPER_SCENARIOS))
-    assert bundled_scenarios() == (*paper_scenarios(), "warehouse", "warehouse_fleet")
+    assert bundled_scenarios() == tuple(sorted((*paper_scenarios(), "warehouse", "warehouse_fleet",
+                                                "occlusion_hall", "warehouse_occlusion")))
 
 
 def test_bundled_scenario_loads_as_the_paper_ran_it(name):
@@ -308,7 +309,7 @@ MOVE_OF_AISLE = """
 lap = {lap}
 action = "move"
 box = "{box}"
-pose = [{x}, -0.66, 0.0]
+pose = [{x}, -0.98, 0.0]
 """
 
 
@@ -379,7 +380,7 @@ pose = [{x}, -0.66, 0.0]
             "before lap 2: box 'carton_aisle': overlaps a protective field",
         ),
         (
-            MOVE_OF_AISLE.format(lap=2, box="carton_aisle", x=3.5).replace("-0.66", "-1.15"),
+            MOVE_OF_AISLE.format(lap=2, box="carton_aisle", x=3.0).replace("-0.98", "4.0"),
             "moves[0]",
             "before lap 2: box 'carton_aisle': never enters a warning field",
         ),
@@ -423,7 +424,7 @@ def test_valid_moves_in_a_user_file_load(tmp_path):
     )
     spec = load_scenario(write(tmp_path, GOOD + moves))
     boxes = {box.name: box.pose for box in lap_worlds(spec)[1].boxes}
-    assert boxes == {"carton_aisle": (3.8, -0.66, 0.0), "pallet_turn": (6.5, -0.5, 0.35)}
+    assert boxes == {"carton_aisle": (3.8, -0.98, 0.0), "pallet_turn": (6.8, -1.0, 0.35)}
 
 
 # --- lap 1 is checked as it stands -------------------------------------------------------
@@ -433,9 +434,9 @@ def test_valid_moves_in_a_user_file_load(tmp_path):
 def flawed_world(tmp_path: Path) -> Path:
     """Return sim1 with carton_north on the path: the robot would stop in front of it."""
     text = (WORLD_DATA_DIR / "sim1.toml").read_text()
-    assert "pose = [8.68, 3.8, 0.0]" in text
+    assert "pose = [8.9, 3.8, 0.0]" in text
     path = tmp_path / "flawed.toml"
-    path.write_text(text.replace("pose = [8.68, 3.8, 0.0]", "pose = [8.3, 3.8, 0.0]"))
+    path.write_text(text.replace("pose = [8.9, 3.8, 0.0]", "pose = [8.3, 3.8, 0.0]"))
     return path
 
 
@@ -472,9 +473,9 @@ def _posts_kept(count: int):
 @pytest.mark.parametrize(
     ("edit", "key", "fragment"),
     [
-        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [3.0, -1.45, 0.0]"),
+        pytest.param(_moved("pose = [3.0, -0.98, 0.0]", "pose = [3.0, -1.45, 0.0]"),
                      "boxes[0]", "box 'carton_aisle': overlaps walls[0]", id="box-in-wall"),
-        pytest.param(_moved("pose = [3.0, -0.66, 0.0]", "pose = [1.0, 0.0, 0.0]"),
+        pytest.param(_moved("pose = [3.0, -0.98, 0.0]", "pose = [1.0, 0.0, 0.0]"),
                      "boxes[0]", "box 'carton_aisle': the swept robot footprint overlaps it",
                      id="box-on-start"),
         pytest.param(_posts_kept(2), "posts", "see fewer than 3 posts", id="two-posts"),
@@ -569,8 +570,8 @@ def test_spec_built_in_code_fails_as_the_file_would(tmp_path, build, text, key):
 
 
 def test_check_moves_blames_the_move_that_broke_the_layout():
-    good = BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, -0.66, 0.0))
-    bad = BoxMove(lap=2, action="move", box="pallet_turn", pose=(6.5, -0.2, 0.35))
+    good = BoxMove(lap=2, action="move", box="carton_aisle", pose=(3.5, -0.98, 0.0))
+    bad = BoxMove(lap=2, action="move", box="pallet_turn", pose=(6.8, -0.2, 0.35))
     world = load_world("sim1")
     check_moves(world, [good], footprint=PIONEER_FOOTPRINT)
     with pytest.raises(SpecError) as caught:
