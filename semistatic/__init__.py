@@ -20,12 +20,12 @@ from semistatic.alignment import Alignment, AlignmentParams, align_points
 from semistatic.association import associate
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
-from semistatic.join import join
+from semistatic.join import merge_group, overlapping_groups
 from semistatic.local_map import LocalMap
 from semistatic.mapper import MapPolyline, PolylineMap, UpdateReport
 from semistatic.merge import merge
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import PackedPolylines, Polyline, as_polyline, as_polylines
 from semistatic.similarity import similarity, tangent_function
 from semistatic.types import Scan
 
@@ -35,18 +35,21 @@ __all__ = [
     "LocalMap",
     "MapPolyline",
     "MapperParams",
+    "PackedPolylines",
     "Polyline",
     "PolylineMap",
     "Scan",
     "UpdateReport",
     "align_points",
     "as_polyline",
+    "as_polylines",
     "associate",
     "douglas_peucker",
     "extract_polylines",
     "hausdorff",
-    "join",
     "merge",
+    "merge_group",
+    "overlapping_groups",
     "restrict",
     "restricted_hausdorff",
     "similarity",

@@ -9,8 +9,7 @@ anything that enters it (a person stepping out from behind a known box) still st
 
 For occupancy, cutting a band out of the polygon is the same as not counting the
 readings that fall inside the band, which is what :func:`explained_readings` computes
-(cheap: one vectorised point-to-segment distance). :func:`adapted_field` returns the
-shrunk polygon itself, for figures and for checking.
+(cheap: one vectorised point-to-segment distance).
 
 Examples
 --------
@@ -26,11 +25,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike
 
 __all__ = [
-    "adapted_field",
     "distance_to_polylines",
     "explained_readings",
 ]
@@ -82,43 +79,15 @@ def explained_readings(
 
     ``points`` and ``known_objects`` must be in the same frame. NaN points (no return)
     are never explained.
+
+    Examples
+    --------
+    >>> explained_readings([[1.02, 0.5], [0.7, 0.0], [np.nan, np.nan]],
+    ...                    [[[1.0, -1.0], [1.0, 1.0]]], margin=0.05)
+    array([ True, False, False])
     """
     if not margin > 0:
         raise ValueError(f"explained_readings: margin must be > 0 m (got {margin})")
     distance = distance_to_polylines(points, known_objects)
     with np.errstate(invalid="ignore"):
         return distance <= margin
-
-
-def adapted_field(
-    field: ArrayLike,
-    known_objects: Sequence[ArrayLike],
-    margin: float,
-    minimum: shapely.Geometry | None = None,
-) -> shapely.Geometry:
-    """Return ``field`` minus a ``margin`` band around each known object, plus ``minimum``.
-
-    All inputs in the robot frame. The result may be a MultiPolygon when an object cuts
-    the field in two.
-
-    Examples
-    --------
-    >>> field = [[0.25, -0.5], [1.4, -0.5], [1.4, 0.5], [0.25, 0.5]]
-    >>> box_face = [[1.0, -0.6], [1.0, 0.6]]
-    >>> shrunk = adapted_field(field, [box_face], margin=0.1)
-    >>> [round(part.bounds[2], 3) for part in shrunk.geoms]  # cut 10 cm either side of the box
-    [0.9, 1.4]
-    """
-    polygon = shapely.Polygon(np.asarray(field, dtype=float))
-    lines = [
-        shapely.LineString(np.asarray(obj, dtype=float))
-        if len(obj) > 1
-        else shapely.Point(np.asarray(obj, dtype=float)[0])
-        for obj in known_objects
-        if len(obj) > 0
-    ]
-    if lines:
-        polygon = polygon.difference(shapely.union_all(shapely.buffer(lines, margin)))
-    if minimum is not None:
-        polygon = polygon.union(minimum)
-    return polygon

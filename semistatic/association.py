@@ -4,7 +4,7 @@ Scan polylines come in scan order (counter-clockwise around the sensor, from the
 ``angle_min`` on the right to ``angle_max`` on the left). Map polylines are sorted the same
 way around the current viewpoint (:func:`sort_ccw`). The association is then a
 dynamic-time-warping recursion over the two ordered lists with the shape similarity
-``s(S_i, M_j)`` of eq. (1) as cost (DESIGN.md detail 6): the optimal monotone path from
+``s(S_i, M_j)`` of eq. (1) as cost (docs/design.md#detail-6): the optimal monotone path from
 ``(0, 0)`` to ``(n - 1, m - 1)`` may pair one scan polyline with several map polylines and
 vice versa. Every pair on the path is then validated by the restricted Hausdorff gate.
 
@@ -47,27 +47,24 @@ Examples
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.frames import wrap_angle_compiled
-from semistatic.hausdorff import pairwise_restricted_hausdorff
-from semistatic.polyline import Polyline, as_polyline, pack_vertices
-from semistatic.similarity import similarity, tangent_compiled, tangent_similarity_compiled
+from semistatic.hausdorff import restricted_hausdorff
+from semistatic.polyline import PackedPolylines, Polyline, as_polyline, as_polylines
+from semistatic.similarity import similarity
 
 __all__ = [
     "FAR_COST",
+    "ValidatedPairs",
     "associate",
-    "associate_boxed",
-    "associate_with_distances",
-    "bounding_boxes",
     "box_gap",
-    "box_gaps",
+    "optimal_path",
     "orient_ccw",
-    "similarity_matrix",
     "sort_ccw",
 ]
 
@@ -78,63 +75,14 @@ __all__ = [
 FAR_COST = 1.0e6
 
 
-def bounding_boxes(polylines: Sequence[Polyline | ArrayLike]) -> np.ndarray:
-    """Return the ``(K, 4)`` axis-aligned boxes ``(xmin, ymin, xmax, ymax)`` of polylines.
-
-    An empty polyline gets the empty box ``(inf, inf, -inf, -inf)``, which is infinitely far
-    from everything in :func:`box_gaps`.
-
-    Examples
-    --------
-    >>> bounding_boxes([[[0.0, 1.0], [2.0, -1.0]], np.empty((0, 2))])
-    array([[ 0., -1.,  2.,  1.],
-           [ inf,  inf, -inf, -inf]])
-    """
-    boxes = [as_polyline(polyline).box for polyline in polylines]
-    return np.array(boxes, dtype=np.float64).reshape(len(boxes), 4)
-
-def box_gaps(boxes_a: ArrayLike, boxes_b: ArrayLike) -> np.ndarray:
-    """Return the ``(K, L)`` Euclidean gaps between two sets of boxes (0 where they touch).
-
-    The gap is a lower bound of the distance between any point in box ``a`` and any point
-    in box ``b``. Empty boxes are ``inf`` away.
-
-    Examples
-    --------
-    >>> box_gaps([[0.0, 0.0, 1.0, 1.0]], [[4.0, 5.0, 6.0, 6.0], [0.5, 0.5, 2.0, 2.0]])
-    array([[5., 0.]])
-    """
-    a = np.ascontiguousarray(boxes_a, dtype=np.float64).reshape(-1, 4)
-    b = np.ascontiguousarray(boxes_b, dtype=np.float64).reshape(-1, 4)
-    return _gap_kernel(a, b)
-
-
-def _boxes(polylines: list[Polyline]) -> np.ndarray:
-    """Return the ``(K, 4)`` cached boxes of polylines as one array."""
-    return np.array([line.box for line in polylines], dtype=np.float64).reshape(-1, 4)
-
-
-def _concatenated(polylines: Sequence[Polyline]) -> tuple[np.ndarray, np.ndarray]:
-    """Return all vertices one after the other and the ``(K + 1,)`` bounds of each polyline."""
-    return pack_vertices([line.points for line in polylines])
-
-
-@numba.njit(cache=True)
-def _gap_kernel(boxes_a, boxes_b):  # pragma: no cover - compiled
-    """Return the ``(K, L)`` Euclidean gaps between boxes (``inf`` for empty boxes)."""
-    gaps = np.empty((boxes_a.shape[0], boxes_b.shape[0]))
-    for k in range(boxes_a.shape[0]):
-        for m in range(boxes_b.shape[0]):
-            gaps[k, m] = box_gap(boxes_a, k, boxes_b, m)
-    return gaps
-
-
 @numba.njit(cache=True)
 def box_gap(boxes_a, k, boxes_b, m):  # pragma: no cover - compiled
     """Return the Euclidean gap between box ``k`` of ``boxes_a`` and box ``m`` of ``boxes_b``.
 
-    One entry of :func:`box_gaps`, compiled, for kernels that test pairs of boxes (rows
-    ``(xmin, ymin, xmax, ymax)``, ``inf`` for an empty box).
+    The gap is a lower bound of the distance between any point in one box and any point
+    in the other, 0 where they touch. Compiled, for kernels that test pairs of boxes (rows
+    ``(xmin, ymin, xmax, ymax)`` as :attr:`~semistatic.polyline.PackedPolylines.boxes`);
+    an empty box is ``inf`` away from everything.
 
     Examples
     --------
@@ -154,7 +102,8 @@ def _viewpoint_pose(viewpoint: ArrayLike) -> np.ndarray:
     pose = np.asarray(viewpoint, dtype=float).reshape(-1)
     if pose.shape == (2,):
         pose = np.append(pose, 0.0)
-    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+    # (Three Python floats: numpy's per-call cost would exceed the test itself.)
+    if pose.shape != (3,) or not all(map(math.isfinite, pose.tolist())):
         raise ValueError(
             f"viewpoint must be a finite (x, y) or (x, y, theta) pose, got {viewpoint!r}"
         )
@@ -175,14 +124,9 @@ def orient_ccw(polyline: Polyline | ArrayLike, viewpoint: ArrayLike) -> Polyline
            [ 1.,  1.]])
     """
     polyline = as_polyline(polyline)
-    points, bounds = _concatenated([polyline])
-    _, clockwise = _ccw_kernel(points, bounds, _viewpoint_pose(viewpoint))
-    return _reversed(polyline) if clockwise[0] else polyline
-
-
-def _reversed(polyline: Polyline) -> Polyline:
-    # Views of valid read-only arrays: nothing to check or copy.
-    return Polyline._trusted(polyline.points[::-1], polyline.scan_indices[::-1])
+    packed = PackedPolylines([polyline])
+    _, clockwise = _ccw_kernel(packed.points, packed.offsets, _viewpoint_pose(viewpoint))
+    return polyline.reversed() if clockwise[0] else polyline
 
 
 @numba.njit(cache=True)
@@ -241,7 +185,9 @@ def _ccw_kernel(points, bounds, pose):  # pragma: no cover - compiled
     return order, clockwise
 
 
-def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) -> np.ndarray:
+def sort_ccw(
+    polylines: PackedPolylines | Iterable[Polyline | ArrayLike], viewpoint: ArrayLike
+) -> np.ndarray:
     """Return the order of ``polylines`` counter-clockwise around ``viewpoint``.
 
     The order matches the order in which a scan taken from ``viewpoint`` would see them:
@@ -270,54 +216,46 @@ def sort_ccw(polylines: Sequence[Polyline | ArrayLike], viewpoint: ArrayLike) ->
     >>> sort_ccw([left, right, ahead], (0.0, 0.0, np.pi))  # turned: "ahead" spans the cut
     array([2, 0, 1])
     """
-    points, bounds = _concatenated([as_polyline(line) for line in polylines])
-    order, _ = _ccw_kernel(points, bounds, _viewpoint_pose(viewpoint))
+    lines = as_polylines(polylines)
+    order, _ = _ccw_kernel(lines.points, lines.offsets, _viewpoint_pose(viewpoint))
     return order
 
 
-def similarity_matrix(
-    scan_polylines: Sequence[Polyline | ArrayLike],
-    map_polylines: Sequence[Polyline | ArrayLike],
-    gate: float | None = None,
-) -> np.ndarray:
-    """Return the ``(n, m)`` similarities ``s(S_i, M_j)`` of eq. (1).
+def optimal_path(costs: ArrayLike) -> list[tuple[int, int]]:
+    """Return the optimal monotone path of eq. (5) through a cost matrix.
 
-    With a ``gate``, pairs whose bounding boxes are more than ``gate`` apart (which can never
-    pass the restricted Hausdorff gate) are not computed and get ``inf``. Pairs with a
-    zero-length polyline are ``inf`` too (no shape).
+    The dynamic-time-warping recursion ``A_ij = {(i, j)} + argmin(A_{i-1,j}, A_{i,j-1},
+    A_{i-1,j-1})`` from ``(0, 0)`` to ``(n - 1, m - 1)`` minimising the summed cost. On
+    equal totals the diagonal step wins (a one-to-one pair), then the step that keeps the
+    map polyline, then the one that keeps the scan polyline.
+
+    Parameters
+    ----------
+    costs
+        ``(n, m)`` cost of each (scan polyline, map polyline) pair, ``n, m >= 1``.
+
+    Returns
+    -------
+    list of (int, int)
+        The cells of the path, from ``(0, 0)`` to ``(n - 1, m - 1)``.
 
     Examples
     --------
-    >>> wall = [[2.0, -1.0], [2.0, 1.0]]
-    >>> similarity_matrix([wall], [[[2.0, -2.0], [2.0, 2.0]], [[9.0, 0.0], [9.0, 1.0]]], gate=0.1)
-    array([[ 0., inf]])
+    >>> optimal_path([[0.0, 5.0, 5.0], [5.0, 0.0, 0.0]])  # the second scan polyline twice
+    [(0, 0), (1, 1), (1, 2)]
     """
-    scans = [as_polyline(polyline) for polyline in scan_polylines]
-    maps = [as_polyline(polyline) for polyline in map_polylines]
-    costs = np.full((len(scans), len(maps)), math.inf)
-    if not scans or not maps:
-        return costs
-    if gate is None:
-        near = np.ones(costs.shape, dtype=bool)
-    else:
-        near = box_gaps(bounding_boxes(scans), bounding_boxes(maps)) <= gate
-    for i, j in zip(*np.nonzero(near), strict=True):
-        costs[i, j] = similarity(scans[i], maps[j])
-    return costs
-
-def _optimal_path(costs: np.ndarray) -> list[tuple[int, int]]:
-    """Return the DTW path of eq. (5) from ``(0, 0)`` to ``(n - 1, m - 1)``.
-
-    On equal totals the diagonal step wins (a one-to-one pair), then the step that keeps
-    the map polyline, then the one that keeps the scan polyline.
-    """
-    path, _ = _dtw_kernel(np.ascontiguousarray(costs, dtype=np.float64))
+    costs = np.ascontiguousarray(costs, dtype=np.float64)
+    if costs.ndim != 2 or 0 in costs.shape:
+        raise ValueError(
+            f"optimal_path: costs must be an (n, m) array, n, m >= 1, got {costs.shape}"
+        )
+    path, _ = _dtw_kernel(costs)
     return [(int(i), int(j)) for i, j in path]
 
 
 @numba.njit(cache=True)
 def _dtw_kernel(cost):  # pragma: no cover - compiled
-    """Return the ``(P, 2)`` path of :func:`_optimal_path` and the table of optimal totals."""
+    """Return the ``(P, 2)`` path of :func:`optimal_path` and the table of optimal totals."""
     n, m = cost.shape
     totals = np.empty((n, m))
     # 0 diagonal, 1 from (i - 1, j), 2 from (i, j - 1); the first row only comes from the left.
@@ -380,8 +318,8 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
     that can pass the gate (:func:`_gateable`); else ``pairs`` mean nothing.
 
     ``feasible`` marks the pairs that can pass the gate; the polylines are given as
-    packed vertices with bounds (:func:`_concatenated`). A pair that cannot pass the
-    gate or has no shape (zero length) costs ``FAR_COST``; any other costs its similarity,
+    packed vertices with bounds (as :func:`_candidates` packs them). A pair that cannot pass
+    the gate or has no shape (zero length) costs ``FAR_COST``; any other costs its similarity,
     the integral of eq. (1) times the length ratio. That integral is a variance, at most a
     quarter of the squared range of ``T1 - T0``, which is at most ``pi`` per turn of either
     polyline: less than ``((N0 + N1) pi)^2 / 4`` for ``N0`` and ``N1`` vertices (eight
@@ -440,115 +378,8 @@ def _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds): 
     return _gateable(path, feasible, scan_bounds, map_bounds), bound < FAR_COST
 
 
-def associate_with_distances(
-    scan_polylines: Sequence[Polyline | ArrayLike],
-    map_polylines: Sequence[Polyline | ArrayLike],
-    gate: float,
-    *,
-    viewpoint: ArrayLike | None = None,
-    mode: str = "vertex",
-) -> list[tuple[int, int, float]]:
-    """Return the validated pairs of :func:`associate` with their restricted Hausdorff distance.
-
-    Parameters and ordering as in :func:`associate`.
-
-    Returns
-    -------
-    list of (int, int, float)
-        ``(scan index, map index, restricted Hausdorff distance in m)``, distance ``<= gate``.
-
-    Examples
-    --------
-    >>> wall = np.array([[2.0, -1.0], [2.0, 1.0]])
-    >>> [(i, j, round(d, 3)) for i, j, d in associate_with_distances([wall + 0.05], [wall], 0.12)]
-    [(0, 0, 0.071)]
-    """
-    if not gate > 0.0:
-        raise ValueError(f"associate: gate must be > 0 m, got {gate!r}")
-    scans = [as_polyline(polyline) for polyline in scan_polylines]
-    maps = [as_polyline(polyline) for polyline in map_polylines]
-    if not scans or not maps:
-        return []
-    return associate_boxed(scans, _boxes(scans), maps, _boxes(maps), gate,
-                           viewpoint=None if viewpoint is None else _viewpoint_pose(viewpoint),
-                           mode=mode)
-
-
-def associate_boxed(
-    scan_polylines: Sequence[Polyline],
-    scan_boxes: np.ndarray,
-    map_polylines: Sequence[Polyline],
-    map_boxes: np.ndarray,
-    gate: float,
-    *,
-    viewpoint: ArrayLike | None = None,
-    mode: str = "vertex",
-    map_vertices: tuple[np.ndarray, np.ndarray] | None = None,
-    scan_vertices: tuple[np.ndarray, np.ndarray] | None = None,
-) -> list[tuple[int, int, float]]:
-    """Return :func:`associate_with_distances` of polylines whose boxes are known.
-
-    For callers that keep their polylines' :func:`bounding_boxes` (``(n, 4)`` and
-    ``(m, 4)``), e.g. a map between updates: the polylines must be :class:`Polyline`
-    objects, ``gate > 0`` and ``viewpoint`` a finite ``(x, y, theta)`` (none is checked
-    here). ``map_vertices`` and ``scan_vertices``, when given, are
-    :func:`semistatic.polyline.pack_vertices` of the map and of the scan polylines
-    (C-contiguous writeable float64 vertices, read, never written).
-
-    Examples
-    --------
-    >>> wall = Polyline([[2.0, -1.0], [2.0, 1.0]])
-    >>> boxes = bounding_boxes([wall])
-    >>> [(i, j, round(d, 3)) for i, j, d in associate_boxed([wall], boxes, [wall], boxes, 0.12)]
-    [(0, 0, 0.0)]
-    """
-    scans, maps = scan_polylines, map_polylines
-    if not scans or not maps:
-        return []
-    scan_points, scan_offsets = _concatenated(scans) if scan_vertices is None else scan_vertices
-    map_points, map_offsets = _concatenated(maps) if map_vertices is None else map_vertices
-    oriented = viewpoint is not None
-    # Only polylines with at least one partner near enough to pass the gate take part:
-    # the others could only fill the path with pairs the gate rejects. One kernel call
-    # finds them, packs them and orders them.
-    rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds = (
-        _candidates(
-            scan_boxes, map_boxes, float(gate), scan_points, scan_offsets, map_points,
-            map_offsets, np.asarray(viewpoint, dtype=np.float64) if oriented else _NO_POSE,
-            oriented,
-        )
-    )
-    if rows.size == 0:
-        return []
-    forced = False
-    if _FORCED_PATHS:
-        pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
-    if not forced:
-        # The map polylines are packed in counter-clockwise order and direction, as the
-        # similarity of tangent functions needs them.
-        costs = _similarity_costs(feasible, scan_points, scan_bounds, map_points, map_bounds)
-        path = np.array(_optimal_path(costs), dtype=np.int64).reshape(-1, 2)
-        pairs = _gateable(path, feasible, scan_bounds, map_bounds)
-    # Stops early above the gate: the value is then only a lower bound, but one that
-    # fails the gate exactly when the full distance does.
-    distances = pairwise_restricted_hausdorff(
-        scan_points, scan_bounds, map_points, map_bounds, pairs, mode, limit=float(gate),
-        trusted=True,  # the kernels' own arrays
-    ).tolist()
-    scan_index, map_index = rows[pairs[:, 0]].tolist(), order[pairs[:, 1]].tolist()
-    return [
-        (i, j, distance)
-        for i, j, distance in zip(scan_index, map_index, distances, strict=True)
-        if distance <= gate
-    ]
-
-
 # The viewpoint passed to the kernel when there is none (then unused).
 _NO_POSE = np.zeros(3)
-
-# Whether the association may take the path the gate alone fixes (False only in tests that
-# compare it with the full recursion).
-_FORCED_PATHS = True
 
 
 @numba.njit(cache=True)
@@ -556,13 +387,14 @@ def _candidates(
     scan_boxes, map_boxes, gate, scan_points, scan_offsets, map_points, map_offsets, pose,
     oriented,
 ):  # pragma: no cover - compiled
-    """Return the candidates of :func:`associate_boxed`, packed and ordered, in one call.
+    """Return the candidates of :func:`associate`, packed and ordered, in one call.
 
-    ``(rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds)``: the
-    scan polylines (``rows``) and the map polylines in counter-clockwise order around
-    ``pose`` (``order``; each packed reversed where it runs clockwise, unless not
-    ``oriented``: then in input order, none reversed) that have a partner within ``gate``,
-    which pairs of them can pass it, and their vertices packed.
+    ``(rows, order, reversed_, feasible, scan_points, scan_bounds, map_points,
+    map_bounds)``: the scan polylines (``rows``) and the map polylines in counter-clockwise
+    order around ``pose`` (``order``; each packed reversed where it runs clockwise, as
+    ``reversed_`` says, unless not ``oriented``: then in input order, none reversed) that
+    have a partner within ``gate``, which pairs of them can pass it, and their vertices
+    packed.
 
     (The path the gate fixes is another call, :func:`_forced_kernel`: a cached kernel two
     calls above :func:`_dtw_kernel` leaves the one loaded for Python without its
@@ -578,7 +410,8 @@ def _candidates(
     feasible, map_points, map_bounds = _arranged(
         near, rows, columns, ranks, clockwise, map_points, map_bounds
     )
-    return rows, columns[ranks], feasible, scan_points, scan_bounds, map_points, map_bounds
+    return (rows, columns[ranks], clockwise[ranks], feasible, scan_points, scan_bounds,
+            map_points, map_bounds)
 
 
 @numba.njit(cache=True)
@@ -594,35 +427,6 @@ def _gathered(points, offsets, which):  # pragma: no cover - compiled
             gathered[bounds[k] + v, 0] = points[start + v, 0]
             gathered[bounds[k] + v, 1] = points[start + v, 1]
     return gathered, bounds
-
-
-@numba.njit(cache=True)
-def _similarity_costs(
-    feasible, scan_points, scan_bounds, map_points, map_bounds
-):  # pragma: no cover - compiled
-    """Return the recursion's costs: :func:`similarity` of each feasible pair, else ``FAR_COST``.
-
-    The polylines are packed (:func:`_concatenated`), the map's in the scan's direction;
-    a pair without shape (similarity ``inf``) costs ``FAR_COST`` too.
-    """
-    n, m = feasible.shape
-    costs = np.empty((n, m))
-    for a in range(n):
-        for b in range(m):
-            costs[a, b] = FAR_COST
-    for a in range(n):
-        scan_line = scan_points[scan_bounds[a] : scan_bounds[a + 1]]
-        breaks0, angles0, length0 = tangent_compiled(scan_line)
-        for b in range(m):
-            if not feasible[a, b]:
-                continue
-            map_line = map_points[map_bounds[b] : map_bounds[b + 1]]
-            breaks1, angles1, length1 = tangent_compiled(map_line)
-            value = tangent_similarity_compiled(breaks0, angles0, length0, breaks1, angles1,
-                                                length1)
-            if value < FAR_COST:  # (inf, no shape, stays FAR_COST)
-                costs[a, b] = value
-    return costs
 
 
 @numba.njit(cache=True)
@@ -688,15 +492,33 @@ def _gateable(path, feasible, scan_bounds, map_bounds):  # pragma: no cover - co
     return pairs[:count]
 
 
+class ValidatedPairs(list):
+    """The ``(scan index, map index)`` pairs :func:`associate` validated, with their distances.
+
+    A list of pairs, as eq. (5) gives them, that also holds the restricted Hausdorff
+    distance of each: ``distances[k]`` (m, at most the gate) is the one of ``self[k]``.
+
+    Examples
+    --------
+    >>> pairs = ValidatedPairs([(0, 2)], [0.03])
+    >>> pairs == [(0, 2)], pairs.distances
+    (True, [0.03])
+    """
+
+    def __init__(self, pairs: Iterable[tuple[int, int]] = (), distances: Iterable[float] = ()):
+        super().__init__(pairs)
+        self.distances = list(distances)
+
+
 def associate(
-    scan_polylines: Sequence[Polyline | ArrayLike],
-    map_polylines: Sequence[Polyline | ArrayLike],
+    scan_polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
+    map_polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
     gate: float,
     *,
     viewpoint: ArrayLike | None = None,
     mode: str = "vertex",
-) -> list[tuple[int, int]]:
-    """Associate scan polylines with map polylines (paper eq. 4-5, DESIGN.md detail 6).
+) -> ValidatedPairs:
+    """Associate scan polylines with map polylines (paper eq. 4-5, docs/design.md#detail-6).
 
     The recursion ``A_ij = {(i, j)} + argmin(A_{i-1,j}, A_{i,j-1}, A_{i-1,j-1})`` runs over
     the scan polylines in the given (scan) order and the map polylines in counter-clockwise
@@ -709,7 +531,7 @@ def associate(
     ----------
     scan_polylines
         Scan polylines in the map frame, in scan order (as :func:`extract_polylines` gives
-        them, transformed by the sensor pose).
+        them, with the sensor pose).
     map_polylines
         Map polylines. Without ``viewpoint`` they must already be sorted counter-clockwise
         around the sensor and traversed counter-clockwise; with ``viewpoint`` they may come
@@ -725,23 +547,77 @@ def associate(
 
     Returns
     -------
-    list of (int, int)
-        ``(scan index, map index)`` pairs, indices into the input lists, sorted by scan
-        index then by position in the counter-clockwise map order. Empty when either list
-        is empty.
+    ValidatedPairs
+        ``(scan index, map index)`` pairs, indices into the inputs, sorted by scan index
+        then by position in the counter-clockwise map order, with their restricted
+        Hausdorff distances. Empty when either input is.
 
     Examples
     --------
     >>> wall = np.array([[2.0, -1.0], [2.0, 1.0]])
+    >>> box = np.array([[1.0, 1.5], [1.0, 2.0], [0.5, 2.0]])
+    >>> associate([wall + [0.02, 0.0], box], [wall, box], gate=0.12)
+    [(0, 0), (1, 1)]
     >>> halves = [wall * [1.0, 0.5] - [0.0, 0.5], wall * [1.0, 0.5] + [0.0, 0.5]]
     >>> associate(halves, [wall], gate=0.12, mode="projection")  # many-to-one
     [(0, 0), (1, 0)]
-    >>> associate([], [wall], gate=0.12)
+    >>> [round(distance, 3) for distance in associate([wall + 0.05], [wall], 0.12).distances]
+    [0.071]
+    >>> associate([wall + [1.0, 0.0]], [wall], gate=0.12)  # 1 m away: rejected by the gate
     []
     """
-    return [
-        (i, j)
-        for i, j, _ in associate_with_distances(
-            scan_polylines, map_polylines, gate, viewpoint=viewpoint, mode=mode
+    if not gate > 0.0:
+        raise ValueError(f"associate: gate must be > 0 m, got {gate!r}")
+    pose = None if viewpoint is None else _viewpoint_pose(viewpoint)
+    scans, maps = as_polylines(scan_polylines), as_polylines(map_polylines)
+    if not scans or not maps:
+        return ValidatedPairs()
+    # Only polylines with at least one partner near enough to pass the gate take part:
+    # the others could only fill the path with pairs the gate rejects. One kernel call
+    # finds them, packs them and orders them.
+    rows, order, reversed_, feasible, scan_points, scan_bounds, map_points, map_bounds = (
+        _candidates(
+            scans.boxes, maps.boxes, float(gate), scans.points, scans.offsets, maps.points,
+            maps.offsets, _NO_POSE if pose is None else pose, pose is not None,
         )
+    )
+    if rows.size == 0:
+        return ValidatedPairs()
+    # The map polylines as the kernels see them: in counter-clockwise order and direction.
+    rows, order, reversed_ = rows.tolist(), order.tolist(), reversed_.tolist()
+    oriented = [
+        maps[j].reversed() if flip else maps[j] for j, flip in zip(order, reversed_, strict=True)
     ]
+    pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
+    if not forced:
+        candidates = [scans[i] for i in rows]
+        costs = _similarity_costs(feasible, candidates, oriented)
+        path = np.array(optimal_path(costs), dtype=np.int64).reshape(-1, 2)
+        pairs = _gateable(path, feasible, scan_bounds, map_bounds)
+    a, b = pairs[:, 0].tolist(), pairs[:, 1].tolist()
+    # Stops early above the gate: the value is then only a lower bound, but one that
+    # fails the gate exactly when the full distance does.
+    distances = restricted_hausdorff(
+        PackedPolylines([scans[rows[k]] for k in a]), PackedPolylines([oriented[k] for k in b]),
+        mode, limit=float(gate),
+    ).tolist()
+    kept = [k for k, distance in enumerate(distances) if distance <= gate]
+    return ValidatedPairs(
+        [(rows[a[k]], order[b[k]]) for k in kept], [distances[k] for k in kept]
+    )
+
+
+def _similarity_costs(
+    feasible: np.ndarray, scans: list[Polyline], maps: list[Polyline]
+) -> np.ndarray:
+    """Return the recursion's costs: :func:`similarity` of each feasible pair, else ``FAR_COST``.
+
+    A pair without shape (similarity ``inf``) costs ``FAR_COST`` too; the map polylines
+    run in the scan's direction.
+    """
+    a, b = np.nonzero(feasible)
+    costs = np.full(feasible.shape, FAR_COST)
+    values = similarity(PackedPolylines([scans[k] for k in a.tolist()]),
+                        PackedPolylines([maps[k] for k in b.tolist()]))
+    costs[a, b] = np.where(values < FAR_COST, values, FAR_COST)
+    return costs

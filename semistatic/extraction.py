@@ -1,14 +1,14 @@
-"""Polyline extraction from one laser scan (paper Sec. 3.1, DESIGN.md details 1-3).
+"""Polyline extraction from one laser scan (paper Sec. 3.1, docs/design.md#detail-1 to #detail-3).
 
 The pipeline is a handful of passes over the beams (numpy, and numba where they fuse):
 
 1. :func:`remove_invalid` - drop ``nan``/``inf`` readings and those outside
    ``[range_min, min(range_max, max_range)]``; they never reach any statistic.
 2. :func:`remove_outliers` - drop isolated readings: ``|r_i - mu_i| > alpha sigma_i`` over
-   the ``2k+1`` valid ranges centred on ``i`` (DESIGN.md detail 1).
+   the ``2k+1`` valid ranges centred on ``i`` (docs/design.md#detail-1).
 3. :func:`split_breakpoints` - cut the beam sequence at the Borges & Aldon adaptive
-   breakpoints and at gaps of missing readings (DESIGN.md detail 2).
-4. :func:`douglas_peucker` - keep the vertices GEOS keeps (DESIGN.md detail 3).
+   breakpoints and at gaps of missing readings (docs/design.md#detail-2).
+4. :func:`douglas_peucker` - keep the vertices GEOS keeps (docs/design.md#detail-3).
 
 :func:`extract_polylines` chains them; one compiled Douglas-Peucker (GEOS's recursion and
 arithmetic) simplifies every interval of a scan, and the merge's polylines too.
@@ -28,18 +28,18 @@ import math
 
 import numba
 import numpy as np
+from numba.extending import overload
 from numpy.typing import ArrayLike
 
-from semistatic.fitting import fit_polylines_compiled
+from semistatic.fitting import fit_polylines
 from semistatic.frames import transform_points
 from semistatic.params import MapperParams
-from semistatic.polyline import PackedPolylines, Polyline
+from semistatic.polyline import PackedPolylines
 from semistatic.types import Scan, beam_directions
 
 __all__ = [
     "MAX_BRIDGED_GAP",
     "douglas_peucker",
-    "douglas_peucker_compiled",
     "extract_polylines",
     "remove_invalid",
     "remove_outliers",
@@ -82,7 +82,7 @@ def remove_invalid(scan: Scan, max_range: float = math.inf) -> np.ndarray:
 
 
 def remove_outliers(ranges: ArrayLike, valid: ArrayLike, k: int, alpha: float) -> np.ndarray:
-    """Return ``valid`` with isolated readings removed (DESIGN.md detail 1).
+    """Return ``valid`` with isolated readings removed (docs/design.md#detail-1).
 
     For each valid reading ``r_i`` the mean ``mu_i`` and (population) standard deviation
     ``sigma_i`` are taken over the window of ``2k+1`` *valid* ranges centred on it
@@ -174,7 +174,7 @@ def split_breakpoints(
     """Split the usable beams of ``scan`` into intervals of one object each.
 
     Consecutive usable beams ``m < n`` (``valid`` true, everything between them missing)
-    belong to the same interval when both hold (DESIGN.md detail 2):
+    belong to the same interval when both hold (docs/design.md#detail-2):
 
     - at most ``MAX_BRIDGED_GAP`` beams are missing between them, and
     - ``|p_n - p_m| <= r_m sin(dphi) / sin(lam - dphi) + 3 sigma_r`` with
@@ -315,14 +315,10 @@ def _extracted(
         start = stop
     points = points[:size]
     # Every interval but the last ends where the next begins.
-    kept = douglas_peucker_compiled(points, ends[: lines - 1 if lines > 1 else 0], epsilon)
+    kept = _douglas_peucker(points, ends[: lines - 1 if lines > 1 else 0], epsilon)
     if fitted and size:
-        # The fit reads the readings' coordinates as two contiguous arrays.
-        for k in range(size):
-            x[k], y[k] = points[k, 0], points[k, 1]
-        vertices, kept, vertex_lines = fit_polylines_compiled(
-            x[:size].copy(), y[:size].copy(), line_ids[:size].copy(), kept, epsilon
-        )
+        vertices, kept, vertex_lines = fit_polylines(points, line_ids[:size].copy(), kept,
+                                                     epsilon)
     else:
         vertices = np.empty((kept.size, 2))
         vertex_lines = np.empty(kept.size, np.int64)
@@ -368,21 +364,13 @@ def _breakpoint_sines(angle_increment: float, lam: float) -> tuple[np.ndarray, n
 
 
 @numba.njit(cache=True)
-def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: float) -> np.ndarray:
-    """Return the positions Douglas-Peucker keeps of lines, inside compiled kernels.
+def _douglas_peucker(
+    points: np.ndarray, ends: np.ndarray, epsilon: float
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Return the positions :func:`douglas_peucker` keeps of many lines at once.
 
     ``points`` hold finite vertices of lines one after the other; line ``k`` ends at
-    ``ends[k]`` (increasing int64; the last line at the last point). No checks: for
-    callers with a checked ``epsilon >= 0``. GEOS's recursion with GEOS's arithmetic
-    (``Distance::pointToSegment`` operation for operation) and rules (the first farthest
-    point on ties, kept only when strictly farther than ``epsilon``), so the same vertices
-    as ``shapely.simplify`` (:func:`douglas_peucker`).
-
-    Examples
-    --------
-    >>> points = np.array([[0.0, 0.0], [1.0, 0.01], [2.0, 0.0], [2.0, 1.0], [3.0, 1.0]])
-    >>> douglas_peucker_compiled(points, np.array([3]), 0.05)  # two lines, 0-3 and 4
-    array([0, 2, 3, 4])
+    ``ends[k]`` (increasing int64; the last line at the last point), ``epsilon >= 0``.
     """
     keep = np.zeros(points.shape[0], np.bool_)
     sections = np.empty((points.shape[0] if points.shape[0] > 1 else 1, 2), np.int64)
@@ -436,7 +424,7 @@ def douglas_peucker_compiled(points: np.ndarray, ends: np.ndarray, epsilon: floa
     return kept
 
 
-# One line: douglas_peucker_compiled without inner line ends.
+# One line: _douglas_peucker without inner line ends.
 _NO_ENDS = np.empty(0, dtype=np.int64)
 
 
@@ -447,7 +435,10 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
     its point-to-*segment* distance is strictly greater than ``epsilon`` (the first one on
     ties): exactly the vertices of
     ``shapely.simplify(LineString(points), epsilon, preserve_topology=False)``
-    (DESIGN.md detail 3), repeated and collinear points included, by one compiled kernel.
+    (docs/design.md#detail-3), repeated and collinear points included, by one compiled kernel:
+    GEOS's recursion with GEOS's arithmetic (``Distance::pointToSegment`` operation for
+    operation). Compiled kernels call this function too (the merge does): it compiles to
+    the same kernel, without the checks.
 
     Parameters
     ----------
@@ -472,12 +463,18 @@ def douglas_peucker(points: ArrayLike, epsilon: float) -> np.ndarray:
         raise ValueError(f"douglas_peucker: epsilon must be >= 0 m, got {epsilon!r}")
     if not np.isfinite(points).all():
         raise ValueError("douglas_peucker: points must be finite; drop invalid readings first")
-    return douglas_peucker_compiled(points, _NO_ENDS, float(epsilon))
+    return _douglas_peucker(points, _NO_ENDS, float(epsilon))
+
+
+@overload(douglas_peucker, jit_options={"cache": True})
+def _douglas_peucker_compiled(points, epsilon):  # pragma: no cover - compiled
+    """Return :func:`douglas_peucker` for compiled callers: their points are valid already."""
+    return lambda points, epsilon: _douglas_peucker(points, np.empty(0, np.int64), epsilon)
 
 
 def extract_polylines(
     scan: Scan, params: MapperParams | None = None, *, pose: ArrayLike | None = None
-) -> list[Polyline]:
+) -> PackedPolylines:
     """Extract the polylines of one scan in the sensor frame or a map's (paper Sec. 3.1).
 
     Invalid readings are removed, then outliers, the remaining beams are split at
@@ -496,8 +493,9 @@ def extract_polylines(
 
     Returns
     -------
-    list of Polyline
-        In scan (counter-clockwise) order; each polyline's ``scan_indices`` are the beam
+    PackedPolylines
+        A list of :class:`~semistatic.polyline.Polyline` in scan (counter-clockwise)
+        order, with their vertices packed; each polyline's ``scan_indices`` are the beam
         indices of its vertices. Every usable reading of an interval lies within
         ``params.epsilon`` of its polyline. An all-no-return scan gives ``[]``.
 
@@ -514,31 +512,14 @@ def extract_polylines(
     params = MapperParams() if params is None else params
     if pose is not None:
         pose = np.asarray(pose, dtype=float).reshape(3)
-        if not np.isfinite(pose).all():
+        # (Three Python floats: numpy's per-call cost would exceed the test itself.)
+        if not all(map(math.isfinite, pose.tolist())):
             raise ValueError(f"extract_polylines: pose must be a finite (x, y, theta), got {pose}")
-    return extracted_in_frame(scan, params, pose)
-
-
-def extracted_in_frame(
-    scan: Scan, params: MapperParams, pose: np.ndarray | None
-) -> PackedPolylines:
-    """Return :func:`extract_polylines` for a pose already checked (the mapper's hot path).
-
-    ``pose`` is a finite float ``(3,)`` array (or ``None`` for the sensor frame), as the
-    caller validated it once per scan; nothing is checked again here.
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=[1.0] * 6, angle_min=-0.03, angle_increment=0.01)
-    >>> extracted_in_frame(scan, MapperParams(), np.array([1.0, 0.0, 0.0]))[0].points.round(3)
-    array([[ 2.  , -0.03],
-           [ 2.  ,  0.02]])
-    """
     vertices, beams, bounds = _extracted_vertices(scan, params)
     if pose is not None:
-        # A fresh array of finite points: the polylines can be views of it, unchecked.
+        # All vertices moved in one transform, into a fresh array the polylines can view.
         vertices = transform_points(pose, vertices)
-    return Polyline._split(vertices, beams, bounds)
+    return PackedPolylines.from_runs(vertices, bounds, beams)
 
 
 def _extracted_vertices(

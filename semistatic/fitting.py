@@ -1,7 +1,7 @@
 """Fitted polyline vertices: edges fitted along the beams between Douglas-Peucker corners.
 
 Douglas-Peucker decides *where* a polyline bends; its vertices are raw readings, i.e. the
-noise extremes of their neighbourhoods (DESIGN.md detail 3). :func:`fit_polyline` keeps the
+noise extremes of their neighbourhoods (docs/design.md#detail-3). :func:`fit_polylines` keeps the
 corners but moves the vertices onto the surface the readings describe:
 
 1. each edge (the readings between two consecutive corners, both included) is fitted
@@ -39,7 +39,7 @@ Examples
 --------
 >>> x = np.array([1.0, 1.01, 0.99, 1.01, 0.99])  # a noisy wall x = 1 seen at 5 readings
 >>> y = np.array([-0.2, -0.1, 0.0, 0.1, 0.2])
->>> vertices, corners = fit_polyline(np.column_stack((x, y)), [0, 2, 4], epsilon=0.03)
+>>> vertices, corners, _ = fit_polylines(np.column_stack((x, y)), [0] * 5, [0, 2, 4], 0.03)
 >>> vertices.round(3), corners  # one line fits: the middle corner goes
 (array([[ 1.004, -0.201],
        [ 0.996,  0.201]]), array([0, 4]))
@@ -51,10 +51,10 @@ import math
 
 import numba
 import numpy as np
+from numba.extending import overload
 from numpy.typing import ArrayLike
 
-__all__ = ["MIXED_PIXEL_SINE", "fit_polyline", "fit_polylines", "fit_polylines_compiled",
-           "is_mixed_pixel", "total_least_squares"]
+__all__ = ["MIXED_PIXEL_SINE", "fit_polylines", "is_mixed_pixel", "total_least_squares"]
 
 # Two fitted lines meeting at less than this angle (sin of 10 deg) are treated as parallel:
 # their intersection is ill-conditioned, so the corner reading's projections are used.
@@ -139,90 +139,91 @@ def is_mixed_pixel(points: ArrayLike, end: int, corner: int, far: int) -> bool:
                              np.empty(count)))
 
 
-def fit_polyline(
-    points: ArrayLike, corners: ArrayLike, epsilon: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Return fitted vertices of one polyline through ``points`` bending at ``corners``.
-
-    See the module docstring for the steps. ``points`` are in the sensor frame (the beams
-    start at the origin), in scan order.
-
-    Parameters
-    ----------
-    points
-        ``(N, 2)`` readings of one interval, ``N >= 2``.
-    corners
-        Increasing positions into ``points`` of the Douglas-Peucker vertices, the first
-        and last point included.
-    epsilon
-        Tolerance (m) within which one line must fit the readings of merged edges.
-
-    Returns
-    -------
-    tuple of numpy.ndarray
-        ``(vertices, kept)``: ``(K, 2)`` fitted vertices and the ``(K,)`` positions into
-        ``points`` of the readings they belong to (a subset of ``corners``).
-
-    Examples
-    --------
-    >>> corner = [[1.0, -0.4], [1.0, -0.2], [1.0, 0.0], [0.8, 0.0], [0.6, 0.0]]
-    >>> vertices, kept = fit_polyline(corner, [0, 2, 4], epsilon=0.01)
-    >>> vertices.round(6) + 0.0, kept
-    (array([[ 1. , -0.4],
-           [ 1. ,  0. ],
-           [ 0.6,  0. ]]), array([0, 2, 4]))
-    """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
-    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
-    if points.shape[0] < 2 or corners.size < 2:
-        raise ValueError("fit_polyline: needs at least 2 points and 2 corners")
-    if corners[0] != 0 or corners[-1] != points.shape[0] - 1 or (np.diff(corners) <= 0).any():
-        raise ValueError(
-            "fit_polyline: corners must increase from 0 to the last point's position"
-        )
-    if not epsilon > 0.0:
-        raise ValueError(f"fit_polyline: epsilon must be > 0 m, got {epsilon!r}")
-    vertices, kept, _ = fit_polylines(points, np.zeros(points.shape[0], np.int64), corners,
-                                      float(epsilon))
-    return vertices, kept
-
-
 def fit_polylines(
-    points: np.ndarray, line_ids: np.ndarray, corners: np.ndarray, epsilon: float
+    points: ArrayLike, line_ids: ArrayLike, corners: ArrayLike, epsilon: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the fitted vertices of every polyline of a scan at once.
 
+    See the module docstring for the steps. ``points`` are in the sensor frame (the beams
+    start at the origin), in scan order. Compiled kernels call this function too (the
+    extraction does): it compiles to the same kernel, without the checks.
+
     Parameters
     ----------
     points
-        ``(P, 2)`` float64 readings of all intervals one after the other (sensor frame).
+        ``(P, 2)`` readings of all intervals one after the other.
     line_ids
-        ``(P,)`` int64, non-decreasing interval number of each reading (each interval
-        has at least two readings).
+        ``(P,)`` non-decreasing interval number of each reading (each interval has at
+        least two readings).
     corners
-        Increasing int64 positions into ``points`` of the Douglas-Peucker vertices, every
+        Increasing positions into ``points`` of the Douglas-Peucker vertices, every
         interval's first and last reading included.
     epsilon
-        Merge tolerance (m), ``> 0``.
+        Tolerance (m) within which one line must fit the readings of merged edges, ``> 0``.
 
     Returns
     -------
     tuple of numpy.ndarray
         ``(vertices, kept, vertex_lines)``: ``(K, 2)`` fitted vertices, the ``(K,)``
-        positions into ``points`` of their readings and the ``(K,)`` interval of each.
+        positions into ``points`` of the readings they belong to (a subset of
+        ``corners``) and the ``(K,)`` interval of each.
 
     Examples
     --------
+    >>> corner = [[1.0, -0.4], [1.0, -0.2], [1.0, 0.0], [0.8, 0.0], [0.6, 0.0]]
+    >>> vertices, kept, _ = fit_polylines(corner, [0] * 5, [0, 2, 4], epsilon=0.01)
+    >>> vertices.round(6) + 0.0, kept
+    (array([[ 1. , -0.4],
+           [ 1. ,  0. ],
+           [ 0.6,  0. ]]), array([0, 2, 4]))
     >>> points = np.array([[1.0, 0.0], [1.0, 0.1], [2.0, 0.0], [2.0, 0.2], [2.0, 0.4]])
-    >>> vertices, kept, lines = fit_polylines(points, np.array([0, 0, 1, 1, 1]),
-    ...                                       np.array([0, 1, 2, 4]), 0.01)
+    >>> vertices, kept, lines = fit_polylines(points, [0, 0, 1, 1, 1], [0, 1, 2, 4], 0.01)
     >>> kept, lines
     (array([0, 1, 2, 4]), array([0, 0, 1, 1]))
     """
-    return fit_polylines_compiled(
-        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
-        line_ids, corners, epsilon,
+    points = np.asarray(points, dtype=float).reshape(-1, 2)
+    line_ids = np.asarray(line_ids, dtype=np.int64).reshape(-1)
+    corners = np.asarray(corners, dtype=np.int64).reshape(-1)
+    count = points.shape[0]
+    if count < 2 or corners.size < 2:
+        raise ValueError("fit_polylines: needs at least 2 points and 2 corners")
+    if not np.isfinite(points).all():
+        raise ValueError("fit_polylines: points must be finite; drop invalid readings first")
+    starts = np.flatnonzero(np.diff(line_ids)) + 1
+    firsts, lasts = np.concatenate(([0], starts)), np.concatenate((starts, [count])) - 1
+    if line_ids.shape != (count,) or (np.diff(line_ids) < 0).any() or (lasts <= firsts).any():
+        raise ValueError(
+            "fit_polylines: line_ids must give each reading its interval, non-decreasing, "
+            "each interval at least 2 readings"
+        )
+    if (
+        corners[0] != 0 or corners[-1] != count - 1 or (np.diff(corners) <= 0).any()
+        or not (np.isin(firsts, corners).all() and np.isin(lasts, corners).all())
+    ):
+        raise ValueError(
+            "fit_polylines: corners must increase from 0 to the last point's position and "
+            "hold every interval's first and last reading"
+        )
+    if not epsilon > 0.0:
+        raise ValueError(f"fit_polylines: epsilon must be > 0 m, got {epsilon!r}")
+    return _fitted(
+        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]), line_ids,
+        corners, float(epsilon),
     )
+
+
+@overload(fit_polylines, jit_options={"cache": True})
+def _fit_polylines_compiled(points, line_ids, corners, epsilon):  # pragma: no cover
+    """Return :func:`fit_polylines` for compiled callers: their arrays are valid already."""
+
+    def fit(points, line_ids, corners, epsilon):
+        # The fit reads the readings' coordinates as two contiguous arrays.
+        x, y = np.empty(points.shape[0]), np.empty(points.shape[0])
+        for k in range(points.shape[0]):
+            x[k], y[k] = points[k, 0], points[k, 1]
+        return _fitted(x, y, line_ids, corners, epsilon)
+
+    return fit
 
 
 @numba.njit(cache=True)
@@ -326,21 +327,8 @@ def _mixed_pixel(x, y, end, corner, low, high, weights):  # pragma: no cover - c
 
 
 @numba.njit(cache=True)
-def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
-    """Return :func:`fit_polylines` of readings given as two coordinate arrays.
-
-    For compiled callers: no checks; ``x`` and ``y`` are the readings' contiguous float64
-    coordinates, the other arguments and the result as :func:`fit_polylines`.
-
-    Examples
-    --------
-    >>> x, y = np.array([1.0, 1.0, 1.0]), np.array([-0.1, 0.0, 0.1])
-    >>> vertices, kept, lines = fit_polylines_compiled(x, y, np.zeros(3, np.int64),
-    ...                                                np.array([0, 1, 2]), 0.01)
-    >>> vertices.round(6) + 0.0, kept, lines
-    (array([[ 1. , -0.1],
-           [ 1. ,  0.1]]), array([0, 2]), array([0, 0]))
-    """
+def _fitted(x, y, line_ids, corners, epsilon):  # pragma: no cover - compiled
+    """Return :func:`fit_polylines` of readings given as two contiguous coordinate arrays."""
     count = corners.size
     # The readings' ranges, once: every fit along the beams weighs each reading by them.
     norms = np.empty(x.size)
@@ -360,114 +348,18 @@ def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cove
         stop = start
         while stop + 1 < count and line_ids[corners[stop + 1]] == line_ids[corners[start]]:
             stop += 1
-        # Merge step: drop a corner while one line fits its two edges within epsilon.
-        # The line of the last merge that dropped a corner spans merged[size - 1]..span:
-        # when the next corner stays, it is the edge's own line (no second fit).
-        size = 1
-        merged[0] = corners[start]
-        span = -1
-        for j in range(start + 1, stop):
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1], weights)
-            # Whether a reading lies farther than epsilon from that line (inline: a kernel
-            # of its own costs a compilation at first use); the first one decides.
-            apart = False
-            for k in range(merged[size - 1], corners[j + 1] + 1):
-                if abs((x[k] - mx) * dy - (y[k] - my) * dx) > epsilon:
-                    apart = True
-                    break
-            if apart:
-                fitted[size - 1] = span if span == corners[j] else -1
-                merged[size] = corners[j]
-                size += 1
-                span = -1
-            else:
-                span = corners[j + 1]
-                fits[size - 1, 0], fits[size - 1, 1] = mx, my
-                fits[size - 1, 2], fits[size - 1, 3] = dx, dy
-        fitted[size - 1] = span if span == corners[stop] else -1
-        merged[size] = corners[stop]
-        size += 1
-        # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
-        if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
-                x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2],
-                weights):
-            size -= 1
-        if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
-                x, y, merged[0], merged[1], merged[1], merged[2], weights):
-            for k in range(size - 1):
-                merged[k] = merged[k + 1]
-            for k in range(size - 2):
-                fitted[k] = fitted[k + 1]
-                for value in range(4):
-                    fits[k, value] = fits[k + 1, value]
-            size -= 1
-        for edge in range(size - 1):
-            if fitted[edge] == merged[edge + 1]:
-                continue
-            mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1], weights)
-            fits[edge, 0] = mx
-            fits[edge, 1] = my
-            fits[edge, 2] = dx
-            fits[edge, 3] = dy
+        size = _merged_edges(x, y, norms, corners, start, stop, epsilon, merged, fits, fitted,
+                             weights)
         for vertex in range(size):
             reading = merged[vertex]
-            px = x[reading]
-            py = y[reading]
-            vx = px
-            vy = py
             if vertex == 0 or vertex == size - 1:
                 edge = 0 if vertex == 0 else size - 2
-                mx, my, dx, dy = fits[edge, 0], fits[edge, 1], fits[edge, 2], fits[edge, 3]
-                norm = math.hypot(px, py)
-                sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
-                if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
-                    vx, vy = _project(px, py, mx, my, dx, dy)
-                else:
-                    # The beam t * (px, py) / norm crosses the line m + s d where
-                    # t = cross(m, d) / cross(beam, d).
-                    t = (mx * dy - my * dx) / sine
-                    cx = t * px / norm
-                    cy = t * py / norm
-                    # A reading on the surface puts the crossing its range error times
-                    # cos(incidence) along the line from itself: at most about epsilon
-                    # (3 sigma). One off the line (on the next face round a corner, a
-                    # mixed pixel) moves it outward by its offset over tan(incidence),
-                    # past the corner: then the reading itself, on the same beam, marks
-                    # how far the readings reach. Outward: away from the edge's other
-                    # reading.
-                    other = merged[1] if vertex == 0 else merged[size - 2]
-                    outward = (px - x[other]) * dx + (py - y[other]) * dy
-                    beyond = (cx - px) * dx + (cy - py) * dy
-                    if beyond * outward <= epsilon * abs(outward):
-                        vx = cx
-                        vy = cy
-                    else:
-                        vx = px
-                        vy = py
+                other = merged[1] if vertex == 0 else merged[size - 2]
+                vx, vy = _end_vertex(x[reading], y[reading], x[other], y[other], fits[edge, 0],
+                                     fits[edge, 1], fits[edge, 2], fits[edge, 3], epsilon)
             else:
-                ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[
-                    vertex - 1, 2], fits[vertex - 1, 3]
-                bx, by, bdx, bdy = fits[vertex, 0], fits[vertex, 1], fits[vertex, 2], fits[
-                    vertex, 3]
-                sine = adx * bdy - ady * bdx
-                use_projection = abs(sine) < MIN_CORNER_SINE
-                if not use_projection:
-                    # a + s ad = b + u bd  ->  s = cross(b - a, bd) / cross(ad, bd)
-                    s = ((bx - ax) * bdy - (by - ay) * bdx) / sine
-                    vx = ax + s * adx
-                    vy = ay + s * ady
-                    before = merged[vertex - 1]
-                    after = merged[vertex + 1]
-                    chord = min(
-                        math.hypot(px - x[before], py - y[before]),
-                        math.hypot(x[after] - px, y[after] - py),
-                    )
-                    use_projection = math.hypot(vx - px, vy - py) > MAX_CORNER_SHIFT * chord
-                if use_projection:
-                    qx, qy = _project(px, py, ax, ay, adx, ady)
-                    rx, ry = _project(px, py, bx, by, bdx, bdy)
-                    vx = 0.5 * (qx + rx)
-                    vy = 0.5 * (qy + ry)
+                vx, vy = _inner_vertex(x, y, merged[vertex - 1], reading, merged[vertex + 1],
+                                       fits, vertex)
             out[written, 0] = vx
             out[written, 1] = vy
             kept[written] = reading
@@ -475,3 +367,124 @@ def fit_polylines_compiled(x, y, line_ids, corners, epsilon):  # pragma: no cove
             written += 1
         start = stop + 1
     return out[:written].copy(), kept[:written].copy(), lines[:written].copy()
+
+
+@numba.njit(cache=True)
+def _merged_edges(
+    x, y, norms, corners, start, stop, epsilon, merged, fits, fitted, weights
+):  # pragma: no cover - compiled
+    """Write the corners that stay of one interval, ``corners[start..stop]``; return how many.
+
+    Steps 1 and 2 of the module docstring: ``merged`` gets the corners that stay,
+    ``fits[e]`` the line ``(mx, my, dx, dy)`` fitted along the beams to edge ``e``
+    (``fitted`` and ``weights`` are scratch).
+    """
+    # Merge step: drop a corner while one line fits its two edges within epsilon.
+    # The line of the last merge that dropped a corner spans merged[size - 1]..span:
+    # when the next corner stays, it is the edge's own line (no second fit).
+    size = 1
+    merged[0] = corners[start]
+    span = -1
+    for j in range(start + 1, stop):
+        mx, my, dx, dy = _fit_rays(x, y, norms, merged[size - 1], corners[j + 1], weights)
+        # Whether a reading lies farther than epsilon from that line (inline: a kernel
+        # of its own costs a compilation at first use); the first one decides.
+        apart = False
+        for k in range(merged[size - 1], corners[j + 1] + 1):
+            if abs((x[k] - mx) * dy - (y[k] - my) * dx) > epsilon:
+                apart = True
+                break
+        if apart:
+            fitted[size - 1] = span if span == corners[j] else -1
+            merged[size] = corners[j]
+            size += 1
+            span = -1
+        else:
+            span = corners[j + 1]
+            fits[size - 1, 0], fits[size - 1, 1] = mx, my
+            fits[size - 1, 2], fits[size - 1, 3] = dx, dy
+    fitted[size - 1] = span if span == corners[stop] else -1
+    merged[size] = corners[stop]
+    size += 1
+    # A one-reading end edge from a mixed pixel goes, the rest of the edge ends the line.
+    if size >= 3 and merged[size - 1] - merged[size - 2] == 1 and _mixed_pixel(
+            x, y, merged[size - 1], merged[size - 2], merged[size - 3], merged[size - 2],
+            weights):
+        size -= 1
+    if size >= 3 and merged[1] - merged[0] == 1 and _mixed_pixel(
+            x, y, merged[0], merged[1], merged[1], merged[2], weights):
+        for k in range(size - 1):
+            merged[k] = merged[k + 1]
+        for k in range(size - 2):
+            fitted[k] = fitted[k + 1]
+            for value in range(4):
+                fits[k, value] = fits[k + 1, value]
+        size -= 1
+    for edge in range(size - 1):
+        if fitted[edge] == merged[edge + 1]:
+            continue
+        mx, my, dx, dy = _fit_rays(x, y, norms, merged[edge], merged[edge + 1], weights)
+        fits[edge, 0] = mx
+        fits[edge, 1] = my
+        fits[edge, 2] = dx
+        fits[edge, 3] = dy
+    return size
+
+
+@numba.njit(cache=True)
+def _end_vertex(px, py, ox, oy, mx, my, dx, dy, epsilon):  # pragma: no cover - compiled
+    """Return an end vertex: where the end reading's beam crosses its edge's line (step 4).
+
+    ``(px, py)`` is the end reading, ``(ox, oy)`` the edge's other reading and
+    ``(mx, my, dx, dy)`` the edge's fitted line.
+    """
+    norm = math.hypot(px, py)
+    sine = (px * dy - py * dx) / norm if norm > 0.0 else 0.0
+    if (dx == 0.0 and dy == 0.0) or abs(sine) < MIN_BEAM_SINE:
+        return _project(px, py, mx, my, dx, dy)
+    # The beam t * (px, py) / norm crosses the line m + s d where
+    # t = cross(m, d) / cross(beam, d).
+    t = (mx * dy - my * dx) / sine
+    cx = t * px / norm
+    cy = t * py / norm
+    # A reading on the surface puts the crossing its range error times cos(incidence)
+    # along the line from itself: at most about epsilon (3 sigma). One off the line (on
+    # the next face round a corner, a mixed pixel) moves it outward by its offset over
+    # tan(incidence), past the corner: then the reading itself, on the same beam, marks
+    # how far the readings reach. Outward: away from the edge's other reading.
+    outward = (px - ox) * dx + (py - oy) * dy
+    beyond = (cx - px) * dx + (cy - py) * dy
+    if beyond * outward <= epsilon * abs(outward):
+        return cx, cy
+    return px, py
+
+
+@numba.njit(cache=True)
+def _inner_vertex(x, y, before, reading, after, fits, vertex):  # pragma: no cover - compiled
+    """Return inner vertex ``vertex`` at reading ``reading``: where its two lines meet (step 3).
+
+    ``before`` and ``after`` are the readings of the neighbouring vertices.
+    """
+    px, py = x[reading], y[reading]
+    vx, vy = px, py
+    ax, ay, adx, ady = fits[vertex - 1, 0], fits[vertex - 1, 1], fits[vertex - 1, 2], fits[
+        vertex - 1, 3]
+    bx, by, bdx, bdy = fits[vertex, 0], fits[vertex, 1], fits[vertex, 2], fits[vertex, 3]
+    sine = adx * bdy - ady * bdx
+    use_projection = abs(sine) < MIN_CORNER_SINE
+    if not use_projection:
+        # a + s ad = b + u bd  ->  s = cross(b - a, bd) / cross(ad, bd)
+        s = ((bx - ax) * bdy - (by - ay) * bdx) / sine
+        vx = ax + s * adx
+        vy = ay + s * ady
+        chord = min(
+            math.hypot(px - x[before], py - y[before]),
+            math.hypot(x[after] - px, y[after] - py),
+        )
+        use_projection = math.hypot(vx - px, vy - py) > MAX_CORNER_SHIFT * chord
+    if use_projection:
+        qx, qy = _project(px, py, ax, ay, adx, ady)
+        rx, ry = _project(px, py, bx, by, bdx, bdy)
+        vx = 0.5 * (qx + rx)
+        vy = 0.5 * (qy + ry)
+    return vx, vy

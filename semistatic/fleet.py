@@ -303,8 +303,10 @@ def merge_segment_map(local_map: LocalMap, message: SegmentMessage) -> int:
     for i, j in concurrent:
         theirs, mine = received[i], local_map[own[j].id]
         newer = theirs if theirs.last_seen > mine.last_seen else mine
-        geometry = merge(mine.polyline, theirs.polyline, params.epsilon,
-                         map_weight=mine.hits / max(theirs.hits, 1))
+        weight = mine.hits / max(theirs.hits, 1)
+        (geometry, _), = merge([mine.polyline], [[theirs.polyline]], params.epsilon,
+                               edge_weights=np.full(max(len(mine.polyline) - 1, 0), weight),
+                               end_weights=[weight])
         # Two vehicles saw it: confirmed, unless the later sighting found it missing.
         status = "blank" if newer.status == "blank" else "confirmed"
         local_map.restore(

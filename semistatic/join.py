@@ -1,19 +1,21 @@
-"""Join overlapping map polylines into one (paper Sec. 3.4, DESIGN.md detail 8).
+"""Join overlapping map polylines into one (paper Sec. 3.4, docs/design.md#detail-8).
 
 After merging, a map may hold two polylines of one object: pieces seen apart that grew
 into each other, or a new polyline that repeats part of an older one. Two polylines
 *overlap* when their restricted Hausdorff distance is within the gate and their extents
-overlap (:func:`overlaps`); each connected group of overlapping polylines becomes one
-polyline, merged into its heaviest member with :func:`semistatic.merge.merge`
-(:func:`join`).
+overlap; :func:`overlapping_groups` finds the connected groups of overlapping polylines,
+and :func:`merge_group` merges each group into its heaviest member with
+:func:`semistatic.merge.merge`.
 
 Examples
 --------
->>> wall, piece = [[0.0, 0.0], [2.0, 0.0]], [[1.5, 0.02], [3.0, 0.02]]
->>> overlaps(wall, piece, gate=0.12, mode="projection")
-True
->>> [members for _, members in join([wall, piece], 0.12, 0.03, mode="projection")]
-[(0, 1)]
+>>> wall, door = [[0.0, 0.0], [2.0, 0.0]], [[5.0, 0.0], [6.0, 0.0]]
+>>> lines = PackedPolylines([wall, door, [[1.5, 0.02], [3.0, 0.02]]])
+>>> groups = overlapping_groups(lines, [True, True, True], 0.12, mode="projection")
+>>> groups
+[[0, 2]]
+>>> merge_group(lines, [1.0, 1.0, 1.0], groups[0], 0.03).points.round(2).tolist()
+[[0.0, 0.0], [3.0, 0.02]]
 """
 
 from __future__ import annotations
@@ -25,11 +27,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.association import box_gap
-from semistatic.hausdorff import pairwise_restricted_hausdorff
+from semistatic.hausdorff import restricted_hausdorff
 from semistatic.merge import distinct_vertices, merge, project_onto
-from semistatic.polyline import Polyline, as_polyline, pack_vertices
+from semistatic.polyline import PackedPolylines, Polyline, as_polylines
 
-__all__ = ["MIN_OVERLAP", "join", "merge_group", "overlapping_groups", "overlaps"]
+__all__ = ["MIN_OVERLAP", "merge_group", "overlapping_groups"]
 
 # Two polylines' extents overlap when the projections of one onto the other span more
 # than this (m): end-to-end pieces that merely touch (a box's two faces at their corner)
@@ -55,36 +57,14 @@ def _projection_span(points: np.ndarray, onto: np.ndarray) -> tuple[float, bool]
     return span, inside
 
 
-def overlaps(
-    p0: Polyline | ArrayLike, p1: Polyline | ArrayLike, gate: float, mode: str = "vertex"
-) -> bool:
-    """Return whether two polylines overlap and should be joined (DESIGN.md detail 8).
-
-    They overlap when their restricted Hausdorff distance is at most ``gate`` and their
-    extents overlap: the orthogonal projections of one onto the other span more than
-    ``MIN_OVERLAP`` (pieces that only touch end to end, like a box's two faces meeting at
-    a corner, do not), or - for a single vertex - it projects inside the other's extent.
-
-    Examples
-    --------
-    >>> wall = [[0.0, 0.0], [2.0, 0.0]]
-    >>> overlaps(wall, [[1.5, 0.03], [3.0, 0.03]], gate=0.12, mode="projection")
-    True
-    >>> overlaps(wall, [[2.0, 0.0], [2.0, 1.0]], gate=0.12)  # meets it at a corner
-    False
-    """
-    points0 = distinct_vertices(as_polyline(p0).points)
-    points1 = distinct_vertices(as_polyline(p1).points)
-    if points0.shape[0] == 0 or points1.shape[0] == 0:
-        return False
-    if not _extents_overlap(points0, points1, gate):
-        return False
-    points, offsets = pack_vertices([points0, points1])
-    return _restricted_hausdorffs(points, offsets, np.array([[0, 1]]), gate, mode)[0] <= gate
-
-
 def _extents_overlap(points0: np.ndarray, points1: np.ndarray, gate: float) -> bool:
-    """Return the extent test of :func:`overlaps` on distinct, non-empty vertices."""
+    """Return whether the extents of two polylines (distinct, non-empty vertices) overlap.
+
+    The orthogonal projections of one onto the other span more than ``MIN_OVERLAP``
+    (pieces that only touch end to end, like a box's two faces meeting at a corner, do
+    not), or - for a single vertex - it projects inside the other's extent; two single
+    vertices overlap within ``gate``.
+    """
     if points0.shape[0] == 1 and points1.shape[0] == 1:
         return bool(np.hypot(*(points0[0] - points1[0])) <= gate)
     if points0.shape[0] == 1 or points1.shape[0] == 1:
@@ -95,102 +75,34 @@ def _extents_overlap(points0: np.ndarray, points1: np.ndarray, gate: float) -> b
     return max(span01, span10) > MIN_OVERLAP
 
 
-def _restricted_hausdorffs(
-    points: np.ndarray, offsets: np.ndarray, pairs: np.ndarray, gate: float, mode: str
-) -> list[float]:
-    """Return the restricted Hausdorff distance of packed polyline ``pairs``, in one call.
-
-    A distance above ``gate`` may be only a lower bound, but it fails the gate exactly
-    when the full distance does (:func:`semistatic.hausdorff.pairwise_restricted_hausdorff`).
-    """
-    return pairwise_restricted_hausdorff(
-        points, offsets, points, offsets, pairs, mode, limit=gate
-    ).tolist()
-
-
-def join(
-    polylines: Sequence[Polyline | ArrayLike],
+def overlapping_groups(
+    polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
+    changed: ArrayLike,
     gate: float,
-    epsilon: float,
     mode: str = "vertex",
-    *,
-    weights: ArrayLike | None = None,
-    candidates: ArrayLike | None = None,
-) -> list[tuple[Polyline, tuple[int, ...]]]:
-    """Join overlapping polylines into one (paper Sec. 3.4, DESIGN.md detail 8).
+) -> list[list[int]]:
+    """Return the groups of two or more overlapping polylines (docs/design.md#detail-8).
 
-    Every pair that :func:`overlaps` is linked (:func:`overlapping_groups`); each
-    connected group is merged into its heaviest member (:func:`merge_group`). The paper
+    Two polylines overlap when their restricted Hausdorff distance (``mode``) is at most
+    ``gate`` and their extents overlap: the orthogonal projections of one onto the other
+    span more than ``MIN_OVERLAP`` (pieces that only touch end to end, like a box's two
+    faces meeting at a corner, do not), or - for a single vertex - it projects inside the
+    other's extent. The groups are the connected components of that relation. The paper
     finds overlapping pairs by a linear scan of the viewpoint-sorted list, i.e. among
     neighbours; here all pairs whose bounding boxes are within ``gate`` are tested, which
-    finds those and overlaps between non-neighbours too.
+    finds those and overlaps between non-neighbours too. Only pairs with at least one
+    ``changed`` member are tested (the others were tested when they last changed).
 
     Parameters
     ----------
     polylines
-        Polylines (or ``(N, 2)`` arrays) in one frame.
+        Polylines in one frame.
+    changed
+        ``(K,)`` booleans: which polylines may have changed since they were last tested.
     gate
         Restricted Hausdorff gate (m).
-    epsilon
-        Douglas-Peucker tolerance (m) for the merged result.
     mode
         Restriction mode of the restricted Hausdorff distance.
-    weights
-        Observation count of each polyline (default 1 each).
-    candidates
-        Indices of the polylines that may have changed; only pairs with at least one of
-        them are tested (the others were tested when they last changed). Default: all.
-
-    Returns
-    -------
-    list of (Polyline, tuple of int)
-        One entry per resulting polyline, with the sorted input indices it was made from,
-        ordered by smallest input index. A polyline joined with nothing is returned as
-        the very object given.
-
-    Examples
-    --------
-    >>> wall, door = [[0.0, 0.0], [2.0, 0.0]], [[5.0, 0.0], [6.0, 0.0]]
-    >>> piece = [[1.5, 0.02], [3.0, 0.02]]
-    >>> [(line.points.round(2).tolist(), members)
-    ...  for line, members in join([wall, door, piece], 0.12, 0.03, mode="projection")]
-    [([[0.0, 0.0], [3.0, 0.02]], (0, 2)), ([[5.0, 0.0], [6.0, 0.0]], (1,))]
-    """
-    lines = [as_polyline(polyline) for polyline in polylines]
-    count = len(lines)
-    weight = [1.0] * count if weights is None else np.asarray(weights, dtype=float).tolist()
-    if np.shape(weight) != (count,):
-        raise ValueError(
-            f"join: weights needs one value per polyline ({count}), got shape {np.shape(weight)}"
-        )
-    changed = np.ones(count, dtype=bool)
-    if candidates is not None:
-        changed[:] = False
-        changed[np.asarray(candidates, dtype=np.int64).reshape(-1)] = True
-    boxes = np.array([line.box for line in lines], dtype=np.float64).reshape(count, 4)
-    groups = overlapping_groups(lines, boxes, changed, gate, mode)
-    joined = {members[0]: (merge_group(lines, weight, members, epsilon), tuple(members))
-              for members in groups}
-    grouped = {k for members in groups for k in members}
-    return [
-        joined.get(k, (line, (k,)))
-        for k, line in enumerate(lines)
-        if k in joined or k not in grouped
-    ]
-
-
-def overlapping_groups(
-    polylines: Sequence[Polyline],
-    boxes: np.ndarray,
-    changed: np.ndarray,
-    gate: float,
-    mode: str = "vertex",
-) -> list[list[int]]:
-    """Return the groups of two or more polylines linked by :func:`overlaps`.
-
-    Only pairs with at least one ``changed`` member whose ``boxes`` (``(K, 4)``, as
-    :func:`semistatic.association.bounding_boxes`) are within ``gate`` of each other are
-    tested: a pair farther apart cannot pass the gate.
 
     Returns
     -------
@@ -199,38 +111,39 @@ def overlapping_groups(
 
     Examples
     --------
-    >>> lines = [Polyline([[0.0, 0.0], [2.0, 0.0]]), Polyline([[1.5, 0.02], [3.0, 0.02]])]
-    >>> boxes = np.array([line.box for line in lines])
-    >>> overlapping_groups(lines, boxes, np.array([False, True]), 0.12, "projection")
+    >>> lines = [[[0.0, 0.0], [2.0, 0.0]], [[1.5, 0.02], [3.0, 0.02]], [[2.0, 0.0], [2.0, 1.0]]]
+    >>> overlapping_groups(lines, [False, True, False], 0.12, "projection")
     [[0, 1]]
-    >>> overlapping_groups(lines, boxes, np.array([False, False]), 0.12, "projection")
+    >>> overlapping_groups(lines, [False, False, True], 0.12)  # meets the wall at a corner
     []
     """
+    lines = as_polylines(polylines)
     first, second = _changed_near_pairs(
-        np.ascontiguousarray(boxes, dtype=np.float64),
-        np.ascontiguousarray(changed, dtype=np.bool_),
-        float(gate),
+        lines.boxes, np.ascontiguousarray(changed, dtype=np.bool_), float(gate)
     )
     if not first.size:
         return []
-    # Distinct vertices of every polyline in a near pair, packed: the restricted Hausdorff
-    # test of all near pairs in one compiled call, the extents only where it passes.
     members = sorted({*first.tolist(), *second.tolist()})
-    distinct = {k: distinct_vertices(as_polyline(polylines[k]).points) for k in members}
-    position = {k: n for n, k in enumerate(members)}
-    points, offsets = pack_vertices([distinct[k] for k in members])
+    # Distinct vertices of every polyline in a near pair: the restricted Hausdorff test of
+    # all near pairs in one compiled call, the extents only where it passes.
+    distinct = {k: distinct_vertices(lines[k].points) for k in members}
     pairs = [
         (a, b) for a, b in zip(first.tolist(), second.tolist(), strict=True)
         if distinct[a].shape[0] and distinct[b].shape[0]  # an empty polyline overlaps nothing
     ]
     if not pairs:
         return []
-    distances = _restricted_hausdorffs(
-        points, offsets,
-        np.array([(position[a], position[b]) for a, b in pairs], dtype=np.int64),
-        gate, mode,
-    )
-    parent = list(range(len(polylines)))
+    # A polyline without repeated vertices serves as it is.
+    measured = {
+        k: lines[k] if distinct[k].shape[0] == len(lines[k]) else Polyline(distinct[k])
+        for k in members
+    }
+    distances = restricted_hausdorff(
+        PackedPolylines([measured[a] for a, _ in pairs]),
+        PackedPolylines([measured[b] for _, b in pairs]),
+        mode, limit=gate,
+    ).tolist()
+    parent = list(range(len(lines)))
 
     def root(k: int) -> int:
         while parent[k] != k:
@@ -274,8 +187,8 @@ def _changed_near_pairs(boxes, changed, gate):  # pragma: no cover - compiled
 
 
 def merge_group(
-    polylines: Sequence[Polyline], weights: Sequence[float], members: Sequence[int],
-    epsilon: float,
+    polylines: PackedPolylines | Sequence[Polyline], weights: Sequence[float],
+    members: Sequence[int], epsilon: float,
 ) -> Polyline:
     """Return the polylines ``members`` merged into one, heaviest first (:func:`merge`).
 
@@ -291,6 +204,9 @@ def merge_group(
     by_weight = sorted(members, key=lambda k: (-weights[k], k))
     result, total = polylines[by_weight[0]], float(weights[by_weight[0]])
     for k in by_weight[1:]:
-        result = merge(result, polylines[k], epsilon, map_weight=total / max(weights[k], 1e-12))
+        weight = total / max(weights[k], 1e-12)
+        (result, _), = merge([result], [[polylines[k]]], epsilon,
+                             edge_weights=np.full(max(len(result) - 1, 0), weight),
+                             end_weights=[weight])
         total += float(weights[k])
     return result

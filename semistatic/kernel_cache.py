@@ -1,4 +1,4 @@
-"""Compile the numba kernels missing from the cache on every core before a run (issue 13).
+"""Compile the numba kernels missing from the cache on every core before a run.
 
 The kernels compile on first use and are cached on disk (``@njit(cache=True)``), so the
 first run after installation compiles them all, one after the other on one core, and so
@@ -60,11 +60,13 @@ __all__ = [
     "SIGNATURES_FILE",
     "SWITCH",
     "Kernel",
+    "compile_kernels",
     "load_kernels",
     "parse_type",
     "publish",
     "remove_obsolete",
     "shares",
+    "start_worker",
     "type_text",
     "uncached",
     "warm_kernel_cache",
@@ -105,6 +107,18 @@ class Kernel:
     def module(self) -> str:
         """The module that defines the function."""
         return self.function.rpartition(".")[0]
+
+    def dispatcher(self) -> object:
+        """Return the compiled function the record names (imported by its name).
+
+        Examples
+        --------
+        >>> kernel = Kernel("semistatic.frames.wrap_angle_compiled", ("float64",), 0.05)
+        >>> kernel.dispatcher().py_func.__name__
+        'wrap_angle_compiled'
+        """
+        module = importlib.import_module(self.module)
+        return getattr(module, self.function.rpartition(".")[2])
 
 
 def parse_type(text: str) -> object:
@@ -185,11 +199,6 @@ def shares(kernels: Sequence[Kernel], count: int, head_start: float = 0.0) -> li
     return split
 
 
-def _dispatcher(kernel: Kernel) -> object:
-    module = importlib.import_module(kernel.module)
-    return getattr(module, kernel.function.rpartition(".")[2])
-
-
 def _index_state(dispatcher: object) -> str:
     """Return ``"current"``, ``"obsolete"`` or ``"missing"``: numba's cache index of a function.
 
@@ -211,7 +220,7 @@ def uncached(kernels: Iterable[Kernel]) -> list[Kernel]:
     >>> uncached([])
     []
     """
-    return [kernel for kernel in kernels if _index_state(_dispatcher(kernel)) != "current"]
+    return [kernel for kernel in kernels if _index_state(kernel.dispatcher()) != "current"]
 
 
 def remove_obsolete(kernels: Iterable[Kernel]) -> int:
@@ -230,7 +239,7 @@ def remove_obsolete(kernels: Iterable[Kernel]) -> int:
     removed = 0
     done: set[tuple[str, str]] = set()
     for kernel in kernels:
-        dispatcher = _dispatcher(kernel)
+        dispatcher = kernel.dispatcher()
         source = (dispatcher.stats.cache_path,
                   Path(dispatcher.py_func.__code__.co_filename).stem)
         if source in done or _index_state(dispatcher) != "obsolete":
@@ -293,12 +302,19 @@ def publish(private: Path, public: Path) -> int:
     return added
 
 
-def _compile(kernels: Iterable[Kernel]) -> None:
+def compile_kernels(kernels: Iterable[Kernel]) -> None:
+    """Compile each kernel for its recorded argument types, in this process.
+
+    Examples
+    --------
+    >>> compile_kernels([Kernel("semistatic.frames.wrap_angle_compiled", ("float64",), 0.05),
+    ...                  Kernel("semistatic.frames.no_such_kernel", ("float64",), 0.05)])
+    """
     for kernel in kernels:
         # Any failure (a kernel renamed or retyped since the file was recorded) leaves
         # that kernel to lazy compilation, where a real error shows itself.
         with contextlib.suppress(Exception):
-            _dispatcher(kernel).compile(tuple(parse_type(text) for text in kernel.arguments))
+            kernel.dispatcher().compile(tuple(parse_type(text) for text in kernel.arguments))
 
 
 def _redirect_caches(folder: str) -> None:
@@ -328,10 +344,10 @@ def _worker(kernels: list[Kernel], folders: dict[str, str], private: str) -> Non
     """
     try:
         _redirect_caches(private)
-        _compile(kernels)
+        compile_kernels(kernels)
         done: set[tuple[str, str]] = set()
         for kernel in kernels:
-            folder = _dispatcher(kernel).stats.cache_path
+            folder = kernel.dispatcher().stats.cache_path
             pair = (folder, folders[kernel.module])
             if pair not in done and os.path.isdir(folder):
                 done.add(pair)
@@ -353,9 +369,21 @@ def _may_fork() -> bool:
             and threading.active_count() == 1)
 
 
-def _start_worker(kernels: list[Kernel], folders: dict[str, str],
-                  private: Path) -> multiprocessing.Process:
-    """Fork a process that runs :func:`_worker` on ``kernels``."""
+def start_worker(kernels: list[Kernel], folders: dict[str, str],
+                 private: Path) -> multiprocessing.Process:
+    """Fork a process that compiles ``kernels`` into ``private`` and publishes them.
+
+    ``folders`` maps each kernel's module to its directory in numba's cache; any failure
+    leaves the kernels to lazy compilation.
+
+    Examples
+    --------
+    >>> with tempfile.TemporaryDirectory() as private:
+    ...     worker = start_worker([], {}, Path(private))
+    ...     worker.join()
+    >>> worker.exitcode
+    0
+    """
     process = multiprocessing.get_context("fork").Process(
         target=_worker, args=(kernels, folders, str(private)), daemon=True)
     process.start()
@@ -388,7 +416,7 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
         kernels = uncached(kernels)
         if not kernels:
             return False
-        folders = {kernel.module: _dispatcher(kernel).stats.cache_path for kernel in kernels}
+        folders = {kernel.module: kernel.dispatcher().stats.cache_path for kernel in kernels}
         remove_obsolete(kernels)
     except (OSError, ImportError, AttributeError):
         return False  # a cache numba cannot locate, or a kernel renamed: compile lazily
@@ -398,10 +426,10 @@ def warm_kernel_cache(workers: int | None = None) -> bool:
         for share in range(1, count):
             if split[share]:
                 with contextlib.suppress(OSError):
-                    started.append(_start_worker(split[share], folders,
-                                                 Path(scratch) / str(share)))
+                    started.append(start_worker(split[share], folders,
+                                                Path(scratch) / str(share)))
         try:
-            _compile(split[0])
+            compile_kernels(split[0])
         except BaseException:
             # Interrupted (Ctrl-C reaches a worker only from a terminal): stop the workers
             # now rather than wait for them. A worker stopped while publishing leaves no

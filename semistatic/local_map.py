@@ -1,4 +1,6 @@
-"""The semi-static local map of one path segment (paper Sec. 4, DESIGN.md details 9-10).
+"""The semi-static local map of one path segment (paper Sec. 4).
+
+Life cycle and maps as in docs/design.md#detail-9 and #detail-10.
 
 A :class:`LocalMap` is a :class:`~semistatic.mapper.PolylineMap` stored in a frame anchored
 at the segment start (``origin``, a pose in the world), that only takes in new polylines
@@ -6,7 +8,7 @@ touching the segment's safety areas (e.g. the union of the warning fields swept 
 segment, given in the segment frame). Everything else - association, merge, join and the
 object life cycle - is the polyline map's.
 
-Maps are saved as GeoJSON in world coordinates (DESIGN.md "Output directory"): one
+Maps are saved as GeoJSON in world coordinates (docs/design.md#contract-outputs): one
 ``LineString`` feature per polyline with properties ``id``, ``segment``, ``status``,
 ``hits``, ``misses`` (and ``first_seen``, ``last_seen``). The collection's own
 ``properties`` (a foreign member, RFC 7946 sec. 6.1) hold the ``origin``, ``next_id`` and
@@ -105,8 +107,6 @@ class LocalMap:
         Name (or number) of the path segment, written to the GeoJSON properties.
     params
         Mapper thresholds; ``MapperParams()`` when omitted.
-    join_mode
-        Restriction used to decide joins (see :class:`~semistatic.mapper.PolylineMap`).
 
     Examples
     --------
@@ -123,7 +123,6 @@ class LocalMap:
         *,
         segment: str | int = 0,
         params: MapperParams | None = None,
-        join_mode: str = "projection",
     ) -> None:
         origin = np.array(origin, dtype=float).reshape(-1)
         if origin.shape != (3,) or not np.all(np.isfinite(origin)):
@@ -145,7 +144,6 @@ class LocalMap:
             params,
             keep=self._touches_safety_area,
             keep_box=None if self.safety_area is None else self._area_box,
-            join_mode=join_mode,
         )
 
     @property

@@ -4,27 +4,28 @@
 extract polylines in the sensor frame, move them into the map frame with the sensor pose,
 sort the map polylines counter-clockwise from that viewpoint, associate, merge, insert the
 unassociated scan polylines as new objects, join overlapping polylines, and run the object
-life cycle (DESIGN.md detail 10):
+life cycle (docs/design.md#detail-10):
 
 - an associated map polyline is ``"confirmed"`` (hits + 1, misses reset to 0);
 - an unassociated scan polyline becomes a ``"new"`` map polyline, reported at once;
 - an unassociated map polyline that *should have been visible* and is not where it was
-  (the scan reads through it: :func:`semistatic.visibility.is_missing`) is ``"blank"``
+  (the scan reads through it: ``missing`` of :func:`semistatic.visibility.visibility`) is
+  ``"blank"``
   and counts a miss; after ``params.miss_limit`` consecutive misses it is deleted. One out
   of view, out of range or occluded counts nothing and is never deleted, and neither does
   one the scan still reads in place although the association did not pair it;
 - where the scan reads through *part* of a map polyline it observed or still reads in place
-  (``params.free_space_cut``, :func:`semistatic.visibility.free_space_cut`), that part is
-  cut away: a box pushed along its own face leaves no stale face. Pieces of an observed
-  polyline that this scan did not observe count a miss.
+  (``params.free_space_cut``, the ``pieces`` of :func:`semistatic.visibility.visibility`),
+  that part is cut away: a box pushed along its own face leaves no stale face. Pieces of an
+  observed polyline that this scan did not observe count a miss.
 
 Two choices beyond the paper: association compares the scan polylines as extracted, but
 what is merged or inserted has its ends moved half a beam gap outward
 (:func:`semistatic.visibility.extend_ends`), which removes the shrinking of objects by the
 beam spacing; and each edge of a map polyline moves toward each observation by
 ``1 / (1 + w)``, ``w`` the observations along that edge so far (``MapPolyline.support``,
-see :func:`semistatic.merge.merge_weighted`). Joins use the projection restriction unless
-``join_mode`` says otherwise, and merge a group into its heaviest member by
+see :func:`semistatic.merge.merge`). Joins use the projection restriction
+(``JOIN_RESTRICTION``) and merge a group into its heaviest member by
 :attr:`MapPolyline.weight` (hits, but no more than its most observed edge): by hits alone
 a stub cut off a long wall, which keeps the wall's hits, was the heaviest and bent the
 box joined to it onto the stub.
@@ -60,29 +61,17 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike
 
-from semistatic.association import associate_boxed, bounding_boxes
-from semistatic.extraction import extracted_in_frame
+from semistatic.association import ValidatedPairs, associate
+from semistatic.extraction import extract_polylines
 from semistatic.join import merge_group, overlapping_groups
-from semistatic.merge import END_TOLERANCE_FACTOR, merge_weighted, transfer_weights
-from semistatic.params import HAUSDORFF_RESTRICTIONS, MapperParams
-from semistatic.polyline import (
-    PackedPolylines,
-    Polyline,
-    as_polyline,
-    frozen_polylines,
-    is_packed,
-    pack_vertices,
-    run_boxes,
-)
+from semistatic.merge import END_TOLERANCE_FACTOR, merge, transfer_weights
+from semistatic.params import MapperParams
+from semistatic.polyline import PackedPolylines, Polyline, as_polyline, as_polylines
 from semistatic.types import Scan
-from semistatic.visibility import (
-    MAX_END_EXTENSION,
-    cuts_and_misses,
-    extend_all_ends,
-    missing_polylines,
-)
+from semistatic.visibility import MAX_END_EXTENSION, extend_ends, visibility
 
 __all__ = [
+    "JOIN_RESTRICTION",
     "MAX_MERGE_WEIGHT",
     "STATUSES",
     "Association",
@@ -99,6 +88,13 @@ STATUSES = ("new", "confirmed", "blank")
 # 0.5-0.8 cm; uncapped to 1000 they reach 0.3-0.45 cm). A moved object is not followed
 # by averaging but re-associated, cut where the scan contradicts it, or missed.
 MAX_MERGE_WEIGHT = 1000
+
+# The restriction of the restricted Hausdorff distance that decides which polylines are
+# joined, whatever params.hausdorff_restriction says: joining removes redundant copies, and
+# a copy of part of a long wall simplified to two vertices is exactly what the vertex
+# restriction cannot recognise (docs/design.md#detail-5); with it, a robot driving along a
+# corridor leaves dozens of overlapping wall fragments in the map.
+JOIN_RESTRICTION = "projection"
 
 @dataclass(frozen=True)
 class MapPolyline:
@@ -122,7 +118,7 @@ class MapPolyline:
     support
         ``(N - 1,)`` how many observations saw each edge (fractional where edges were
         joined: length-weighted), the per-edge weight of
-        :func:`semistatic.merge.merge_weighted`; ``None`` when unknown (a polyline built
+        :func:`semistatic.merge.merge`; ``None`` when unknown (a polyline built
         elsewhere): then :attr:`edge_weights` takes ``hits`` for every edge.
 
     Examples
@@ -239,9 +235,9 @@ class UpdateReport:
     stamp
         The scan's stamp (s).
     scan_polylines
-        The extracted scan polylines, in the map frame, in scan order (a tuple; from an
-        update, a :class:`~semistatic.polyline.PackedPolylineTuple` that also keeps their
-        packed vertices and boxes for :meth:`PolylineMap.associate`).
+        The extracted scan polylines, in the map frame, in scan order (from an update, the
+        :class:`~semistatic.polyline.PackedPolylines` of the extraction, which another
+        map's :meth:`PolylineMap.associate` can take as they are).
     associated
         Validated pairs with their restricted Hausdorff distance (m), by scan index.
     unassociated
@@ -251,7 +247,7 @@ class UpdateReport:
         joined into an older polyline).
     missed_ids
         Ids of map polylines not associated although they should have been visible, and
-        not where they were (:func:`is_missing`).
+        not where they were (``missing`` of :func:`semistatic.visibility.visibility`).
     deleted_ids
         Ids deleted by the life cycle in this update.
     joined
@@ -265,7 +261,7 @@ class UpdateReport:
     """
 
     stamp: float
-    scan_polylines: tuple[Polyline, ...] = ()
+    scan_polylines: Sequence[Polyline] = ()
     associated: tuple[Association, ...] = ()
     unassociated: tuple[int, ...] = ()
     new_ids: tuple[int, ...] = ()
@@ -287,13 +283,6 @@ class PolylineMap:
         ``(xmin, ymin, xmax, ymax)`` outside which ``keep`` is known to be false (e.g. the
         bounds of a safety area): new scan polylines far from it are dropped before any
         work is spent on them. Default: no such box.
-    join_mode
-        Restriction of the restricted Hausdorff distance that decides which polylines are
-        joined. Default ``"projection"`` whatever ``params.hausdorff_restriction`` says:
-        joining removes redundant copies, and a copy of part of a long wall simplified to
-        two vertices is exactly what the vertex restriction cannot recognise (DESIGN.md
-        detail 5). With ``"vertex"``, a robot driving along a corridor leaves dozens of
-        overlapping wall fragments in the map.
 
     Examples
     --------
@@ -310,14 +299,8 @@ class PolylineMap:
         *,
         keep: Callable[[Polyline], bool] | None = None,
         keep_box: tuple[float, float, float, float] | None = None,
-        join_mode: str = "projection",
     ) -> None:
-        if join_mode not in HAUSDORFF_RESTRICTIONS:
-            raise ValueError(
-                f"PolylineMap: join_mode must be one of {HAUSDORFF_RESTRICTIONS}, got {join_mode!r}"
-            )
         self.params = MapperParams() if params is None else params
-        self.join_mode = join_mode
         self._keep = keep
         self._keep_box = keep_box
         self._entries = _Entries()
@@ -431,104 +414,52 @@ class PolylineMap:
         params = self.params
         pose = _finite_pose(pose, "update")
         stamp = scan.stamp
-        scan_lines = _map_frame_polylines(scan, params, pose)
+        scan_lines = extract_polylines(scan, params, pose=pose)
         clock.lap("extract")
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
-        paired_scans = {pair.scan_index for pair in associated}
-        unpaired_set = set(unpaired_ids)
         clock.lap("associate")
 
         # Association compares what the scan saw; the map takes the unbiased ends.
-        indices = sorted([*paired_scans, *self._maybe_kept(scan_lines, unassociated)])
-        every = len(indices) == len(scan_lines)  # then the scan's packed vertices serve
-        observed = dict(zip(indices, extend_all_ends(
-            scan_lines if every else [scan_lines[index] for index in indices],
-            scan.angle_increment, viewpoint=pose,
-            packed=(scan_lines.points, scan_lines.offsets) if every else None,
-        ), strict=True))
+        observed = extend_ends(scan_lines, scan.angle_increment, viewpoint=pose)
         changed = self._merge_associated(observed, associated, stamp)
-        cut_away = []
+        cut_away, seen = [], None
         if params.free_space_cut:
-            # The join reads the same geometry unless the cut or an insertion changes it.
-            # The unpaired polylines are checked for the life cycle in the same pass: nothing
-            # until then changes them (the merge, the cut and the join exclude them).
-            geometry = self._geometry()
-            which = [k for k, map_id in enumerate(geometry.ids) if map_id in changed]
-            unpaired_at = [k for k, map_id in enumerate(geometry.ids) if map_id in unpaired_set]
-            unpaired_at_ids = [geometry.ids[k] for k in unpaired_at]
-            cut_pieces, unpaired_checked = cuts_and_misses(
-                [geometry.lines[k] for k in which], [geometry.lines[k] for k in unpaired_at],
-                scan, pose, params, packed=(geometry.points, geometry.offsets, which + unpaired_at),
-            )
-            cuts = {
-                geometry.ids[k]: pieces
-                for k, pieces in zip(which, cut_pieces, strict=True)
-                if pieces is not None
-            }
-            if cuts:
-                seen = {pair.map_id: observed[pair.scan_index] for pair in associated}
-                cut_away, pieces = self._cut(cuts, seen)
-                changed.update(pieces)  # new pieces may join others like any changed one
+            cut_away, seen = self._cut_observed(scan, pose, observed, associated, changed)
         changed.difference_update(cut_away)
         new_ids = self._insert_new(
-            [observed[index] for index in unassociated if index in observed], stamp
+            [observed[index] for index in self._maybe_kept(scan_lines, unassociated)], stamp
         )
         changed.update(new_ids)
         clock.lap("merge")
 
         joined = self._join(changed, set(new_ids))
-        absorbed = {gone for gone, _ in joined}
-        joined_survivors = {kept for _, kept in joined}
         inserted = set(new_ids)
         # A new polyline joined into an older one is that object seen again, not a new one.
         new_ids = [
             map_id
             for map_id in new_ids
-            if map_id not in absorbed
+            if all(gone != map_id for gone, _ in joined)
             and all(gone in inserted for gone, kept in joined if kept == map_id)
         ]
         clock.lap("join")
 
-        missed, deleted = [], list(cut_away)
-        unpaired = [
-            map_id for map_id in unpaired_ids
-            if map_id not in absorbed and map_id not in joined_survivors
-        ]
-        if params.free_space_cut:
-            by_id = dict(zip(unpaired_at_ids, unpaired_checked, strict=True))
-            checked = [by_id[map_id] for map_id in unpaired]
-        else:
-            missing = missing_polylines(self._polylines_of(unpaired), scan, pose, params)
-            checked = [(flag, []) for flag in missing]
-        present = {}
-        for map_id, (missing, pieces) in zip(unpaired, checked, strict=True):
-            if not missing:
-                present[map_id] = pieces
-                continue
-            entry = self._entries[map_id]
-            missed.append(map_id)
-            if entry.misses + 1 >= params.miss_limit:
-                del self._entries[map_id]
-                deleted.append(map_id)
-            else:
-                self._entries[map_id] = _replaced(entry, status="blank", misses=entry.misses + 1)
-        if params.free_space_cut:
-            # Not associated and not missing: still where it was, except perhaps in part.
-            deleted += self._cut(present, {})[0]
+        joined_ids = {map_id for pair in joined for map_id in pair}
+        unpaired = [map_id for map_id in unpaired_ids if map_id not in joined_ids]
+        missed, deleted = self._life_cycle(scan, pose, unpaired, seen)
         clock.lap("life_cycle")
         return UpdateReport(
             stamp,
-            frozen_polylines(scan_lines),
+            scan_lines,
             associated,
             unassociated,
             new_ids=tuple(new_ids),
             missed_ids=tuple(missed),
-            deleted_ids=tuple(deleted),
+            deleted_ids=tuple(cut_away + deleted),
             joined=tuple(joined),
         )
 
     def associate(
-        self, scan: Scan, pose: ArrayLike, *, scan_polylines: tuple[Polyline, ...] | None = None,
+        self, scan: Scan, pose: ArrayLike, *, scan_polylines: Sequence[Polyline] | None = None,
         find_missed: bool = True,
     ) -> UpdateReport:
         """Associate one scan with the map without changing the map (paper Sec. 6, Table 1).
@@ -562,53 +493,37 @@ class PolylineMap:
         """
         pose = _finite_pose(pose, "associate")
         if scan_polylines is None:
-            scan_lines = _map_frame_polylines(scan, self.params, pose)
+            scan_lines = extract_polylines(scan, self.params, pose=pose)
         else:
-            scan_lines = scan_polylines
+            scan_lines = as_polylines(scan_polylines)
         associated, unassociated, unpaired_ids = self._associated(scan_lines, pose)
-        if not find_missed:
-            unpaired_ids = []
-        checked = (missing_polylines(self._polylines_of(unpaired_ids), scan, pose, self.params)
-                   if unpaired_ids else [])
-        missed = tuple(
-            map_id for map_id, missing in zip(unpaired_ids, checked, strict=True) if missing
-        )
-        return UpdateReport(
-            scan.stamp, frozen_polylines(scan_lines), associated, unassociated, missed_ids=missed
-        )
+        missed = ()
+        if find_missed and unpaired_ids:
+            seen = visibility(self._polylines_of(unpaired_ids), scan, pose, self.params,
+                              cut=False)
+            missed = tuple(
+                map_id for map_id, missing in zip(unpaired_ids, seen.missing.tolist(),
+                                                  strict=True) if missing
+            )
+        return UpdateReport(scan.stamp, scan_lines, associated, unassociated, missed_ids=missed)
 
     def _associated(
-        self, scan_lines: Sequence[Polyline], pose: np.ndarray
+        self, scan_lines: PackedPolylines, pose: np.ndarray
     ) -> tuple[tuple[Association, ...], tuple[int, ...], list[int]]:
-        """Return the validated pairs, the unpaired scan indices and the unpaired map ids.
-
-        ``scan_lines`` as extracted (:class:`PackedPolylines`, or an update report's
-        :class:`PackedPolylineTuple` of them) bring their packed vertices
-        and boxes; any other sequence is packed here.
-        """
+        """Return the validated pairs, the unpaired scan indices and the unpaired map ids."""
         geometry = self._geometry()
         ids = geometry.ids
-        packed = is_packed(scan_lines)
-        triples = associate_boxed(
-            scan_lines,
-            scan_lines.boxes if packed else bounding_boxes(scan_lines),
-            geometry.lines,
-            geometry.boxes,
-            self.params.gate,
-            viewpoint=pose,
-            mode=self.params.hausdorff_restriction,
-            map_vertices=(geometry.points, geometry.offsets),
-            scan_vertices=(scan_lines.points, scan_lines.offsets) if packed else None,
-        )
-        associated = _associations(triples, ids)
-        paired_scans = {i for i, _, _ in triples}
+        pairs = associate(scan_lines, geometry.lines, self.params.gate, viewpoint=pose,
+                          mode=self.params.hausdorff_restriction)
+        associated = _associations(pairs, ids)
+        paired_scans = {i for i, _ in pairs}
         paired_ids = {pair.map_id for pair in associated}
         unassociated = tuple([i for i in range(len(scan_lines)) if i not in paired_scans])
         unpaired_ids = [map_id for map_id in ids if map_id not in paired_ids]
         return associated, unassociated, unpaired_ids
 
     def _geometry(self) -> _Geometry:
-        """Return the ids, polylines, vertices and boxes of the map, once per map state.
+        """Return the ids and the polylines of the map, packed, once per map state.
 
         Association and join need the boxes of every map polyline; between two updates
         (and after an update that changed nothing) the same ones serve again.
@@ -623,9 +538,72 @@ class PolylineMap:
         # (Polylines compare by identity: the same objects under the same ids.)
         if cached is not None and cached.ids == ids and cached.lines == lines:
             return cached
-        points, offsets = pack_vertices([line.points for line in lines])
-        self._geometry_cache = _Geometry(ids, lines, points, offsets, run_boxes(points, offsets))
+        self._geometry_cache = _Geometry(ids, PackedPolylines(lines))
         return self._geometry_cache
+
+    def _cut_observed(
+        self, scan: Scan, pose: np.ndarray, observed: PackedPolylines,
+        associated: tuple[Association, ...], changed: set[int],
+    ) -> tuple[list[int], dict[int, tuple[bool, PackedPolylines | None]]]:
+        """Cut the free space out of the merged polylines; return the ids gone, and the rest.
+
+        Adds the new pieces' ids to ``changed`` (they may join others like any changed
+        polyline). The rest: whether each other map polyline is missing, and what the cut
+        leaves of it (``None``: nothing cut), by id, as the scan found them before this
+        update cut, inserted or joined anything. Nothing until then changes them (the merge,
+        the cut and the join exclude them): the one pass over the beams serves both.
+        """
+        ids, lines = self._geometry()
+        seen = visibility(lines, scan, pose, self.params)
+        others = {
+            map_id: (missing, pieces)
+            for map_id, missing, pieces in zip(ids, seen.missing.tolist(), seen.pieces,
+                                               strict=True)
+            if map_id not in changed
+        }
+        cuts = {
+            map_id: pieces for map_id, pieces in zip(ids, seen.pieces, strict=True)
+            if map_id in changed and pieces is not None
+        }
+        cut_away: list[int] = []
+        if cuts:
+            observations = {pair.map_id: observed[pair.scan_index] for pair in associated}
+            cut_away, pieces = self._cut(cuts, observations)
+            changed.update(pieces)
+        return cut_away, others
+
+    def _life_cycle(
+        self, scan: Scan, pose: np.ndarray, unpaired: list[int],
+        seen: dict[int, tuple[bool, PackedPolylines | None]] | None,
+    ) -> tuple[list[int], list[int]]:
+        """Count a miss of each ``unpaired`` polyline that is missing; return missed, deleted.
+
+        ``seen``: what :meth:`_cut_observed` found of them, or ``None`` without the
+        free-space cut (then they are checked here). A polyline missed ``miss_limit`` times
+        in a row is deleted; one not missing loses what the scan reads through, if anything.
+        """
+        params = self.params
+        if seen is None and unpaired:
+            checked = visibility(self._polylines_of(unpaired), scan, pose, params, cut=False)
+            seen = dict(zip(unpaired, zip(checked.missing.tolist(), checked.pieces, strict=True),
+                            strict=True))
+        missed, deleted, present = [], [], {}
+        for map_id in unpaired:
+            is_missing, pieces = seen[map_id]
+            if not is_missing:
+                if pieces is not None:
+                    present[map_id] = pieces
+                continue
+            entry = self._entries[map_id]
+            missed.append(map_id)
+            if entry.misses + 1 >= params.miss_limit:
+                del self._entries[map_id]
+                deleted.append(map_id)
+            else:
+                self._entries[map_id] = _replaced(entry, status="blank", misses=entry.misses + 1)
+        # Not associated and not missing: still where it was, except perhaps in part.
+        deleted += self._cut(present, {})[0]
+        return missed, deleted
 
     def _maybe_kept(self, scan_lines: PackedPolylines, indices: tuple[int, ...]) -> list[int]:
         """Return the ``indices`` of scan polylines that ``keep`` might accept once extended."""
@@ -648,23 +626,24 @@ class PolylineMap:
 
     def _merge_associated(
         self,
-        observed: Mapping[int, Polyline],
+        observed: PackedPolylines,
         associated: tuple[Association, ...],
         stamp: float,
     ) -> set[int]:
         by_map: dict[int, list[int]] = {}
         for pair in associated:
             by_map.setdefault(pair.map_id, []).append(pair.scan_index)
+        if not by_map:
+            return set()
         epsilon = self.params.epsilon
         entries = [self._entries[map_id] for map_id in by_map]
-        merged = merge_weighted(
+        merged = merge(
             [entry.polyline for entry in entries],
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
-            map_weights=[entry.edge_weights for entry in entries],
+            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
             end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
-            trusted=True,  # the map's own polylines and weights, the scan's own parts
         )
         for entry, (line, support) in zip(entries, merged, strict=True):
             self._entries[entry.id] = _replaced(
@@ -696,23 +675,21 @@ class PolylineMap:
         return [self._entries[map_id].polyline for map_id in ids]
 
     def _cut(
-        self, cuts: Mapping[int, list[Polyline]], seen: Mapping[int, Polyline]
+        self, cuts: Mapping[int, PackedPolylines], seen: Mapping[int, Polyline]
     ) -> tuple[list[int], list[int]]:
         """Replace polylines by the pieces a scan left of them; return the ids gone and new.
 
-        ``cuts`` are :func:`semistatic.visibility.free_space_cut`'s pieces by map id. The
-        piece nearest to what the scan saw of it (``seen``, by map id) keeps the id and
-        state. The others are parts this scan did not confirm, and it contradicted the
-        polyline they came from: new ids, counted as a miss (status ``"blank"``), so that
-        what a moving thing leaves behind goes as a miss would. A polyline read through
-        everywhere is deleted.
+        ``cuts`` are the free-space cut's pieces by map id (the ``pieces`` of
+        :func:`semistatic.visibility.visibility` where it cut something). The piece nearest
+        to what the scan saw of it (``seen``, by map id) keeps the id and state. The others
+        are parts this scan did not confirm, and it contradicted the polyline they came
+        from: new ids, counted as a miss (status ``"blank"``), so that what a moving thing
+        leaves behind goes as a miss would. A polyline read through everywhere is deleted.
         """
         gone, added = [], []
         for map_id in sorted(cuts):
             entry = self._entries[map_id]
             pieces = cuts[map_id]
-            if len(pieces) == 1 and pieces[0] is entry.polyline:
-                continue
             if not pieces:
                 del self._entries[map_id]
                 gone.append(map_id)
@@ -752,13 +729,12 @@ class PolylineMap:
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
         if not changed or len(self._entries) < 2:
             return []
-        ids, lines, _, _, boxes = self._geometry()
+        ids, lines = self._geometry()
         groups = overlapping_groups(
             lines,
-            boxes,
             np.array([map_id in changed for map_id in ids], dtype=bool),
             self.params.gate,
-            self.join_mode,
+            JOIN_RESTRICTION,
         )
         if not groups:
             return []
@@ -820,27 +796,20 @@ class _Entries(dict):
 
 
 class _Geometry(NamedTuple):
-    """The map's ids and polylines in map order, their packed vertices and boxes."""
+    """The map's ids and polylines in map order (packed, with their boxes)."""
 
     ids: list[int]
-    lines: list[Polyline]
-    points: np.ndarray
-    """All vertices one polyline after the other (:func:`pack_vertices`)."""
-    offsets: np.ndarray
-    boxes: np.ndarray
-    """``(K, 4)`` bounding boxes."""
+    lines: PackedPolylines
 
 
-def _associations(
-    triples: list[tuple[int, int, float]], ids: list[int]
-) -> tuple[Association, ...]:
-    """Return the :class:`Association` of each ``(scan index, map index, distance)``.
+def _associations(pairs: ValidatedPairs, ids: list[int]) -> tuple[Association, ...]:
+    """Return the :class:`Association` of each pair of scan and map index, with its distance.
 
     Built field by field (it has nothing to check): a few per scan, twenty in a busy one.
     """
     new = object.__new__
     associations = []
-    for scan_index, map_index, distance in triples:
+    for (scan_index, map_index), distance in zip(pairs, pairs.distances, strict=True):
         pair = new(Association)
         fields = pair.__dict__
         fields["scan_index"], fields["map_id"], fields["distance"] = (
@@ -856,12 +825,6 @@ def _finite_pose(pose: ArrayLike, method: str) -> np.ndarray:
     if not all(map(math.isfinite, pose.tolist())):
         raise ValueError(f"PolylineMap.{method}: pose must be a finite (x, y, theta), got {pose}")
     return pose
-
-
-def _map_frame_polylines(scan: Scan, params: MapperParams, pose: np.ndarray) -> PackedPolylines:
-    """Return the polylines of ``scan`` (:func:`extract_polylines`) in the map frame."""
-    # The pose passed _finite_pose already: the extraction does not check it again.
-    return extracted_in_frame(scan, params, pose)
 
 
 class _StageClock:

@@ -1,17 +1,18 @@
 """Merge a scan polyline into its map polyline (joining map polylines: :mod:`semistatic.join`).
 
-Paper Sec. 3.4 and DESIGN.md details 7-8. The vertices of the scan polyline are projected
-onto the map polyline and inserted by their arc-length position; where the scan sees
-farther than the map at either end, the map is extended with the scan's vertices; the
-result is simplified again with Douglas-Peucker.
+Paper Sec. 3.4 and docs/design.md#detail-7, #detail-8. The vertices of the scan polyline
+are projected onto the map polyline and inserted by their arc-length position; where the
+scan sees farther than the map at either end, the map is extended with the scan's
+vertices; the result is simplified again with Douglas-Peucker.
 
 Merging is also an averaging step, so that repeated observations of an unchanged object
 converge instead of drifting or growing:
 
 - a map polyline that summarises ``w`` observations moves toward the scan by
-  ``alpha = 1 / (1 + w)`` (``map_weight=w``): each map vertex that faces the scan moves
-  ``alpha`` of the way to its nearest point on the scan polyline, and each inserted scan
-  vertex lies ``alpha`` of the way from its projection on the map to where the scan saw it.
+  ``alpha = 1 / (1 + w)`` (edge and end weights ``w``): each map vertex that faces the
+  scan moves ``alpha`` of the way to its nearest point on the scan polyline, and each
+  inserted scan vertex lies ``alpha`` of the way from its projection on the map to where
+  the scan saw it.
   Vertices inserted close to a map edge are collinear with it and removed by
   Douglas-Peucker, so the vertex count stays that of the shape, not of the observations;
 - an end of the scan within ``end_tolerance`` of the map's end (noise, beam spacing) moves
@@ -26,17 +27,19 @@ converge instead of drifting or growing:
 Examples
 --------
 >>> wall = [[0.0, 0.0], [2.0, 0.0]]
->>> merge(wall, [[1.0, 0.02], [3.0, 0.02]], epsilon=0.03).points.round(3)  # seen farther
+>>> (line, _), = merge([wall], [[[[1.0, 0.02], [3.0, 0.02]]]], epsilon=0.03)  # seen farther
+>>> line.points.round(3)
 array([[0.  , 0.  ],
        [3.  , 0.02]])
->>> merge(wall, [[0.0, 0.02], [2.0, 0.02]], epsilon=0.03, map_weight=3.0).points.round(3)
+>>> (line, _), = merge([wall], [[[[0.0, 0.02], [2.0, 0.02]]]], 0.03, edge_weights=[3.0],
+...                    end_weights=[3.0])
+>>> line.points.round(3)
 array([[0.   , 0.005],
        [2.   , 0.005]])
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,17 +48,22 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike
 
-from semistatic.extraction import douglas_peucker_compiled
+from semistatic.extraction import douglas_peucker
 from semistatic.fitting import MIN_CORNER_SINE
-from semistatic.polyline import Polyline, as_polyline, pack_vertices, run_offsets
+from semistatic.polyline import (
+    PackedPolylines,
+    Polyline,
+    as_polyline,
+    as_polylines,
+    run_offsets,
+)
 
 __all__ = [
+    "DUPLICATE_DISTANCE",
     "END_TOLERANCE_FACTOR",
+    "Projection",
     "distinct_vertices",
     "merge",
-    "merge_observation",
-    "merge_observations",
-    "merge_weighted",
     "project_onto",
     "transfer_weights",
 ]
@@ -201,19 +209,6 @@ def distinct_vertices(points: ArrayLike) -> np.ndarray:
     return _distinct(np.array(points, dtype=float).reshape(-1, 2))  # writeable, as in merge
 
 
-# The scan indices 0..N-1 of merged polylines, one read-only array per N.
-_VERTEX_ORDER: dict[int, np.ndarray] = {}
-
-
-def _vertex_order(count: int) -> np.ndarray:
-    """Return the read-only scan indices ``0..count-1``, shared by every polyline of that size."""
-    indices = _VERTEX_ORDER.get(count)
-    if indices is None:
-        indices = _VERTEX_ORDER[count] = np.arange(count, dtype=np.int64)
-        indices.flags.writeable = False
-    return indices
-
-
 @numba.njit(cache=True)
 def _extend_with_point(
     vertices: np.ndarray, point: np.ndarray, tolerance: float
@@ -277,165 +272,135 @@ def _reverse_rows(points: np.ndarray) -> None:  # pragma: no cover - compiled
 
 
 def merge(
-    map_polyline: Polyline | ArrayLike,
-    scan_polyline: Polyline | ArrayLike,
+    map_polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
+    observations: Sequence[Sequence[Polyline | ArrayLike]],
     epsilon: float,
     *,
-    map_weight: float = 1.0,
+    edge_weights: ArrayLike | None = None,
+    end_weights: ArrayLike | None = None,
     end_tolerance: float | None = None,
-) -> Polyline:
-    """Merge an associated scan polyline into a map polyline (DESIGN.md detail 7).
+) -> list[tuple[Polyline, np.ndarray]]:
+    """Merge what one observation saw of each map polyline into it (docs/design.md#detail-7).
+
+    ``observations[k]`` are the scan polylines one scan associated with
+    ``map_polylines[k]``: usually one, several when an occluder cut the object in pieces.
+    They are merged into it in turn, all against the same map weights, since together
+    they are one observation; every map polyline is merged in one compiled call.
+
+    The map is averaged edge by edge: ``edge_weights`` holds one weight per edge of the
+    map polylines, how many observations saw that edge so far; each scan edge is one
+    more. Where the scan lies along a map edge, the map moves toward it by the scan's
+    share of the weight there, ``1 / (1 + w)`` (weight
+    ``0`` replaces the overlapping part by the scan's). Every edge of the result weighs
+    what of the map and of the scan lies along it (length-weighted where
+    re-simplification joins edges), so a well observed face converges while a face seen
+    only lately - or a chord that bridged a gap to an extension, which no observation
+    supports: weight 0 - follows the views that see it. A whole-polyline weight (the hit
+    count) would freeze such a face at its first view.
+
+    The ends are averaged as the whole polyline's: ``end_weights[k]`` (e.g. the hit
+    count of ``map_polylines[k]``) is what an end, and a polyline that is a single vertex,
+    weighs against a scan's end. An end keeps the reach that many views gave it against
+    a few that stop short of it by beam spacing, whatever the weight of its last edge.
 
     Parameters
     ----------
-    map_polyline
-        The map polyline; its direction is kept.
-    scan_polyline
-        The associated observation, in the same frame; it is reversed if it runs the other
-        way along the map polyline.
+    map_polylines
+        The map polylines; each keeps its direction.
+    observations
+        Per map polyline, the scan polylines associated with it, in the same frame; each
+        is reversed where it runs the other way along the map polyline.
     epsilon
         Douglas-Peucker tolerance (m) of the re-simplification, ``> 0``.
-    map_weight
-        How many observations the map polyline stands for relative to the scan polyline
-        (e.g. its hit count): the map moves ``1 / (1 + map_weight)`` of the way toward the
-        scan. ``0`` replaces the overlapping part by the scan's.
+    edge_weights
+        The weights ``>= 0`` of the edges of all map polylines, one polyline after the
+        other (``len(line) - 1`` each, none for fewer than two vertices). Default: 1 (one
+        observation) each.
+    end_weights
+        Per map polyline, the weight ``>= 0`` of its ends. Default: 1 each.
     end_tolerance
         Ends closer than this (m) are the same end seen again and are averaged; farther
         scan ends extend the map. Default ``END_TOLERANCE_FACTOR * epsilon``.
 
     Returns
     -------
-    Polyline
-        The merged polyline; its scan indices are the vertex order (``0..N-1``), since
-        its vertices no longer come from one scan. An empty scan polyline returns
-        ``map_polyline`` itself; a single-vertex one only extends the map when it lies
+    list of (Polyline, numpy.ndarray)
+        Per map polyline, the merged polyline and its edge weights (read-only). Its scan
+        indices are the vertex order (``0..N-1``), since its vertices no longer come from
+        one scan. A map polyline whose observation has no vertices comes back as itself,
+        with its weights; a single-vertex scan polyline only extends the map when it lies
         beyond an end.
 
     Examples
     --------
     >>> box = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]
-    >>> merge(box, [[1.0, 0.5], [1.0, 1.6]], epsilon=0.03).points  # the scan saw more
-    array([[0. , 0. ],
-           [1. , 0. ],
-           [1. , 1.6]])
-    >>> len(merge(box, [[0.4, 0.01], [0.6, -0.01]], epsilon=0.03))  # a partial view
+    >>> [(line.points.tolist(), weights.tolist())  # the scan saw more
+    ...  for line, weights in merge([box], [[[[1.0, 0.5], [1.0, 1.6]]]], epsilon=0.03)]
+    [([[0.0, 0.0], [1.0, 0.0], [1.0, 1.6]], [1.0, 1.3125])]
+    >>> (line, _), = merge([box], [[[[0.4, 0.01], [0.6, -0.01]]]], 0.03)  # a partial view
+    >>> len(line)
     3
-    """
-    return _merged_parts("merge", [map_polyline], [[scan_polyline]], epsilon, [map_weight],
-                         end_tolerance)[0][0]
-
-
-def merge_observation(
-    map_polyline: Polyline | ArrayLike,
-    parts: Sequence[Polyline | ArrayLike],
-    epsilon: float,
-    *,
-    map_weight: float = 1.0,
-    end_tolerance: float | None = None,
-) -> Polyline:
-    """Merge the scan polylines one observation associated with a map polyline.
-
-    A map polyline may be associated with several polylines of one scan (an object cut
-    by an occluder): each is merged in turn with :func:`merge`, all with the same
-    ``map_weight``, since together they are one observation. Parameters as :func:`merge`.
-
-    Examples
-    --------
     >>> wall = [[0.0, 0.0], [4.0, 0.0]]
     >>> parts = [[[0.0, 0.02], [1.5, 0.02]], [[2.5, 0.02], [4.0, 0.02]]]  # a pillar between
-    >>> merge_observation(wall, parts, epsilon=0.03).points.round(3)
-    array([[0.  , 0.01],
-           [4.  , 0.01]])
-    """
-    return _merged_parts("merge_observation", [map_polyline], [parts], epsilon, [map_weight],
-                         end_tolerance)[0][0]
-
-
-def merge_observations(
-    map_polylines: Sequence[Polyline | ArrayLike],
-    observations: Sequence[Sequence[Polyline | ArrayLike]],
-    epsilon: float,
-    *,
-    map_weights: Sequence[float],
-    end_tolerance: float | None = None,
-) -> list[Polyline]:
-    """Return :func:`merge_observation` of many map polylines, in one compiled call.
-
-    ``observations[k]`` are the scan polylines one scan associated with
-    ``map_polylines[k]``, which stands for ``map_weights[k]`` observations. A map
-    polyline whose observation has no vertices is returned as itself.
-
-    Examples
-    --------
-    >>> walls = [[[0.0, 0.0], [2.0, 0.0]], [[0.0, 1.0], [2.0, 1.0]]]
-    >>> seen = [[[[0.0, 0.02], [2.0, 0.02]]], [[[0.0, 1.02], [3.0, 1.02]]]]
-    >>> [line.points.round(3).tolist()
-    ...  for line in merge_observations(walls, seen, 0.03, map_weights=[1.0, 3.0])]
-    [[[0.0, 0.01], [2.0, 0.01]], [[0.0, 1.005], [3.0, 1.02]]]
-    """
-    return [line for line, _ in _merged_parts("merge_observations", map_polylines,
-                                               observations, epsilon, map_weights,
-                                               end_tolerance)]
-
-
-def merge_weighted(
-    map_polylines: Sequence[Polyline | ArrayLike],
-    observations: Sequence[Sequence[Polyline | ArrayLike]],
-    epsilon: float,
-    *,
-    map_weights: Sequence[float | ArrayLike],
-    end_weights: Sequence[float] | None = None,
-    end_tolerance: float | None = None,
-    trusted: bool = False,
-) -> list[tuple[Polyline, np.ndarray]]:
-    """Return :func:`merge_observations` with the edge weights of each merged polyline.
-
-    The map is averaged edge by edge (issue 10, Build item 4): ``map_weights[k]`` holds
-    one weight per edge of ``map_polylines[k]`` (or one number for all of them), how many
-    observations saw that edge so far; each scan edge is one more. Where the scan lies
-    along a map edge, the map moves toward it by the scan's share of the weight there,
-    ``1 / (1 + w)``. Every edge of the result weighs what of the map and of the scan lies
-    along it (length-weighted where re-simplification joins edges), so a well observed
-    face converges while a face seen only lately - or a chord that bridged a gap to an
-    extension, which no observation supports: weight 0 - follows the views that see it.
-    A whole-polyline weight (the hit count) would freeze such a face at its first view.
-
-    The ends are averaged as the whole polyline's: ``end_weights[k]`` (e.g. the hit
-    count; default: a number given as ``map_weights[k]``, else the mean edge weight) is
-    what an end, and a polyline that is a single vertex, weighs against a scan's end. An
-    end keeps the reach that many views gave it against a few that stop short of it by
-    beam spacing, whatever the weight of its last edge.
-
-    ``trusted=True`` skips the checks of the polylines and weights, for a caller that made
-    them itself (the mapper, once per scan): every polyline and part a
-    :class:`~semistatic.polyline.Polyline`, ``map_weights[k]`` a float64 array of one
-    value >= 0 per edge, ``end_weights`` given, all >= 0. The result is the same.
-    Weights of a merged polyline are read-only views, as its vertices are.
-
-    Examples
-    --------
-    >>> box = [[0.8, 0.0], [1.0, -0.1], [1.0, -1.0]]  # a chord no view supported, a face
+    >>> [line.points.round(3).tolist() for line, _ in merge([wall], [parts], 0.03)]
+    [[[0.0, 0.01], [4.0, 0.01]]]
+    >>> chord = [[0.8, 0.0], [1.0, -0.1], [1.0, -1.0]]  # a chord no view supported, a face
     >>> corner_seen = [[0.85, 0.0], [1.0, 0.0], [1.0, -1.0]]
     >>> [(line.points.round(3).tolist(), weights.round(2).tolist()) for line, weights
-    ...  in merge_weighted([box], [[corner_seen]], 0.03, map_weights=[[0.0, 20.0]],
-    ...                    end_weights=[20.0])]
+    ...  in merge([chord], [[corner_seen]], 0.03, edge_weights=[0.0, 20.0], end_weights=[20.0])]
     [([[0.802, 0.0], [1.0, 0.0], [1.0, -1.0]], [1.0, 19.0])]
-    >>> merge(box, corner_seen, 0.03, map_weight=20.0).points.round(3)  # one weight: kept
-    array([[ 0.802,  0.   ],
-           [ 1.   , -0.1  ],
-           [ 1.   , -1.   ]])
-    >>> seen = [[Polyline(corner_seen)]]
-    >>> [weights.tolist() for _, weights in merge_weighted(
-    ...     [Polyline(box)], seen, 0.03, map_weights=[np.array([0.0, 20.0])],
-    ...     end_weights=[20.0], trusted=True)] == [weights.tolist() for _, weights in
-    ...     merge_weighted([box], seen, 0.03, map_weights=[[0.0, 20.0]], end_weights=[20.0])]
-    True
+    >>> [line.points.round(3).tolist()  # one weight for the whole polyline: the chord stays
+    ...  for line, _ in merge([chord], [[corner_seen]], 0.03, edge_weights=[20.0, 20.0],
+    ...                       end_weights=[20.0])]
+    [[[0.802, 0.0], [1.0, -0.1], [1.0, -1.0]]]
     """
-    if trusted:
-        return _merged_checked(list(map_polylines), observations, epsilon, list(map_weights),
-                               np.array(end_weights, dtype=float), end_tolerance)
-    return _merged_parts("merge_weighted", map_polylines, observations, epsilon,
-                         map_weights, end_tolerance, end_weights)
+    if not epsilon > 0.0:
+        raise ValueError(f"merge: epsilon must be > 0 m, got {epsilon!r}")
+    tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
+    if not tolerance >= 0.0:
+        raise ValueError(f"merge: end_tolerance must be >= 0 m, got {end_tolerance!r}")
+    lines = as_polylines(map_polylines)
+    if len(observations) != len(lines):
+        raise ValueError(
+            f"merge: need one observation per map polyline, got {len(lines)} polylines and "
+            f"{len(observations)} observations"
+        )
+    edge_counts = np.maximum(np.diff(lines.offsets) - 1, 0)
+    weight_offsets = run_offsets(edge_counts.tolist(), len(lines))
+    weights = _checked_weights("edge_weights", edge_weights, int(weight_offsets[-1]),
+                               "edge of the map polylines")
+    point_weights = _checked_weights("end_weights", end_weights, len(lines), "map polyline")
+    parts = as_polylines([part for line_parts in observations for part in line_parts])
+    # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of parts.
+    first_parts = run_offsets(map(len, observations), len(observations))
+    merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
+        lines.points, lines.offsets, weights, weight_offsets, parts.points, parts.offsets,
+        first_parts, point_weights, tolerance, epsilon,
+    )
+    views = PackedPolylines.from_runs(merged[: merged_offsets[-1]], merged_offsets)
+    bounds, merged_bounds = weight_offsets.tolist(), merged_weight_offsets.tolist()
+    # (Read-only after the call: the kernel's signature takes writeable arrays.)
+    weights.flags.writeable = merged_weights.flags.writeable = False
+    return [
+        (view, merged_weights[merged_bounds[k] : merged_bounds[k + 1]]) if is_changed
+        else (line, weights[bounds[k] : bounds[k + 1]])
+        for k, (line, view, is_changed) in enumerate(
+            zip(lines, views, changed.tolist(), strict=True)
+        )
+    ]
+
+
+def _checked_weights(name: str, given: ArrayLike | None, count: int, what: str) -> np.ndarray:
+    """Return a copy of ``count`` weights ``>= 0`` as float64 (default: 1 each), or say why not."""
+    if given is None:
+        return np.ones(count)
+    weights = np.array(given, dtype=float).reshape(-1)
+    if weights.shape != (count,):
+        raise ValueError(f"merge: {name} needs one value per {what} ({count}), got {weights.size}")
+    # (NaN fails too.)
+    if not weights.min(initial=0.0) >= 0.0:
+        raise ValueError(f"merge: {name} must be >= 0, got {given!r}")
+    return weights
 
 
 def transfer_weights(
@@ -468,97 +433,6 @@ def transfer_weights(
     return _weights_of(along, distinct_weights)
 
 
-def _merged_parts(
-    caller: str,
-    map_polylines: Sequence[Polyline | ArrayLike],
-    observations: Sequence[Sequence[Polyline | ArrayLike]],
-    epsilon: float,
-    map_weights: Sequence[float | ArrayLike],
-    end_tolerance: float | None,
-    end_weights: Sequence[float] | None = None,
-) -> list[tuple[Polyline, np.ndarray]]:
-    """Return :func:`merge_weighted` with its parameters checked once for ``caller``."""
-    if not epsilon > 0.0:
-        raise ValueError(f"{caller}: epsilon must be > 0 m, got {epsilon!r}")
-    tolerance = END_TOLERANCE_FACTOR * epsilon if end_tolerance is None else end_tolerance
-    if not tolerance >= 0.0:
-        raise ValueError(f"{caller}: end_tolerance must be >= 0 m, got {end_tolerance!r}")
-    lines = [as_polyline(line) for line in map_polylines]
-    if not (len(lines) == len(observations) == len(map_weights)):
-        raise ValueError(
-            f"{caller}: need one observation and one weight per map polyline, got "
-            f"{len(lines)} polylines, {len(observations)} observations, "
-            f"{len(map_weights)} weights"
-        )
-    edge_counts = [max(len(line) - 1, 0) for line in lines]
-    edge_weights, point_weights = [], np.ones(len(lines))
-    for k, (edges, weight) in enumerate(zip(edge_counts, map_weights, strict=True)):
-        if not (isinstance(weight, np.ndarray) and weight.dtype == np.float64):
-            weight = np.asarray(weight, dtype=float)
-        if weight.ndim == 0:
-            point_weights[k] = weight
-            weight = np.full(edges, float(weight))
-        elif weight.shape != (edges,):
-            raise ValueError(
-                f"{caller}: map weights of polyline {k} need one value per edge ({edges}), "
-                f"got shape {weight.shape}"
-            )
-        elif edges and end_weights is None:
-            point_weights[k] = weight.mean()
-        edge_weights.append(weight)
-    if end_weights is not None:
-        point_weights = np.asarray(end_weights, dtype=float).reshape(-1)
-    weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
-    weight_offsets = run_offsets(edge_counts, len(edge_counts))
-    # One check for all (NaN fails too); the message names the first offender.
-    if not (weights.min(initial=0.0) >= 0.0 and point_weights.min(initial=0.0) >= 0.0):
-        k = next(k for k, weight in enumerate(edge_weights)
-                 if not ((weight >= 0.0).all() and point_weights[k] >= 0.0))
-        raise ValueError(f"{caller}: map_weight must be >= 0, got {map_weights[k]!r}")
-    parts = [[as_polyline(part) for part in line_parts] for line_parts in observations]
-    return _merged_checked(lines, parts, epsilon, edge_weights, point_weights, tolerance,
-                           weights, weight_offsets)
-
-
-def _merged_checked(
-    lines: list[Polyline], parts: Sequence[Sequence[Polyline]], epsilon: float,
-    edge_weights: list[np.ndarray], point_weights: np.ndarray, tolerance: float | None,
-    weights: np.ndarray | None = None, weight_offsets: np.ndarray | None = None,
-) -> list[tuple[Polyline, np.ndarray]]:
-    """Return :func:`_merged_parts` for polylines and per-edge weights already valid.
-
-    ``tolerance`` ``None``: the default end tolerance; ``weights`` and ``weight_offsets``
-    (the packed ``edge_weights``) are packed here when not given.
-    """
-    if tolerance is None:
-        tolerance = END_TOLERANCE_FACTOR * epsilon
-    if weights is None:
-        weights = np.concatenate(edge_weights) if edge_weights else np.empty(0)
-        weight_offsets = run_offsets(map(len, edge_weights), len(edge_weights))
-    flat_parts = [part for line_parts in parts for part in line_parts]
-    points, offsets = pack_vertices([line.points for line in lines])
-    part_points, part_offsets = pack_vertices([part.points for part in flat_parts])
-    # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of part_points.
-    first_parts = run_offsets(map(len, parts), len(parts))
-    merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
-        points, offsets, weights, weight_offsets, part_points, part_offsets, first_parts,
-        point_weights, tolerance, epsilon,
-    )
-    bounds, weight_bounds = merged_offsets.tolist(), merged_weight_offsets.tolist()
-    # Views of the fresh arrays, frozen once (scan indices: vertex order).
-    views = Polyline._views(merged, bounds, [
-        _vertex_order(stop - start) for start, stop in itertools.pairwise(bounds)
-    ])
-    merged_weights.flags.writeable = False
-    return [
-        (view, merged_weights[weight_bounds[k] : weight_bounds[k + 1]])
-        if is_changed else (line, edge_weights[k])
-        for k, (line, view, is_changed) in enumerate(
-            zip(lines, views, changed.tolist(), strict=True)
-        )
-    ]
-
-
 @numba.njit(cache=True)
 def _merge_all(
     points: np.ndarray, offsets: np.ndarray, weights: np.ndarray, weight_offsets: np.ndarray,
@@ -577,6 +451,15 @@ def _merge_all(
     Per map polyline, ``line_weights`` are its edge weights before this observation (the
     map's side of each average: the parts of one observation all weigh against them),
     ``line_totals`` those with the parts of this observation merged so far.
+
+    One piece of ~170 lines because numba re-optimises a callee's whole code inside each
+    caller (see the merge proper below): every level of kernels between this one and the
+    helpers at the bottom costs their compilation again. Measured (CPU seconds to compile
+    this kernel from an empty cache, 2 shared cores under load, paired runs): split into
+    a kernel per part (one scan polyline, the merge proper, the direction and contradicted
+    ends, the ends, the candidate vertices), mean 18.3 -> 22.3 s over 3 runs (+22%); the
+    same parts inlined into it (``inline="always"``), median 18.2 -> 22.0 s over 6 runs
+    (+18%, every run slower).
     """
     count = offsets.size - 1
     merged = np.empty((max(points.shape[0] + part_points.shape[0], 1), 2))
@@ -615,7 +498,7 @@ def _merge_all(
                 line_weights = _weights_of(along, old_weights)
                 line_totals = _weights_of(along, old_totals)
             else:
-                # The merge proper (DESIGN.md detail 7), written out here rather than as a
+                # The merge proper (docs/design.md#detail-7), written out here rather than as a
                 # kernel of its own: numba re-optimises a callee's whole code inside each
                 # caller, so one level less halves the compilation of everything below.
                 # First the scan's direction along the map, and the map's ends the scan
@@ -756,8 +639,8 @@ def _merge_all(
                 totals += _weights_of(_edges_along(candidates, new, tolerance), new_weights)
                 line, line_weights = candidates, _weights_of(along, old_weights)
                 line_totals = totals
-            # Simplified again (DESIGN.md detail 3); one vertex stays as it is.
-            kept = douglas_peucker_compiled(line, np.empty(0, np.int64), epsilon)
+            # Simplified again (docs/design.md#detail-3); one vertex stays as it is.
+            kept = douglas_peucker(line, epsilon)
             line_weights = _kept_weights(line, line_weights, kept)
             line_totals = _kept_weights(line, line_totals, kept)
             line = _rows_at(line, kept)

@@ -1,7 +1,7 @@
 """Every threshold of the polyline mapper, in one frozen dataclass.
 
 Defaults are chosen for a Sick LMS100 / S300 class scanner (0.5 deg resolution,
-~1-3 cm range noise) in indoor hallways, following the paper and ``DESIGN.md``.
+~1-3 cm range noise) in indoor hallways, following the paper and ``docs/design.md``.
 
 Examples
 --------
@@ -36,10 +36,10 @@ VERTEX_PLACEMENTS = ("fitted", "raw")
 class MapperParams:
     """Thresholds of extraction, association, merge, join and the object life cycle.
 
-    Extraction (paper Sec. 3.1, DESIGN.md details 1-3)
+    Extraction (paper Sec. 3.1, docs/design.md#detail-1 to #detail-3)
 
     outlier_removal
-        Delete statistical outliers (the paper's filter, DESIGN.md detail 1). Off by
+        Delete statistical outliers (the paper's filter, docs/design.md#detail-1). Off by
         default: on real scans the readings it deletes are real returns (through a gap,
         off a thin object), and once deleted a polyline may cross their rays. Kept, an
         isolated reading breaks the polyline around it and forms no polyline of its own.
@@ -72,7 +72,7 @@ class MapperParams:
     max_range
         Readings beyond this (m) are ignored by the mapper (``inf``: the scan's own limit).
 
-    Association and map (Sec. 3.2-4, DESIGN.md details 4-10)
+    Association and map (Sec. 3.2-4, docs/design.md#detail-4 to #detail-10)
 
     gate
         Restricted Hausdorff validation gate (m): "slightly above 10 cm".
@@ -86,7 +86,7 @@ class MapperParams:
         along its bearing.
     free_space_cut
         Cut the parts of an observed map polyline that the scan reads through, beyond
-        ``visibility_margin`` (:func:`semistatic.visibility.free_space_cut`): a box
+        ``visibility_margin`` (:func:`semistatic.visibility.visibility`): a box
         pushed along its own face leaves no stale face in the map. On by default.
     """
 

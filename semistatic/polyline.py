@@ -1,9 +1,11 @@
 """The polyline: an ordered vertex list that remembers which laser beams it came from.
 
 A polyline is an ``(N, 2)`` float64 vertex array plus the scan index of each vertex
-(DESIGN.md, conventions). The restricted Hausdorff distance and the merge rely on the
+(docs/design.md, Conventions). The restricted Hausdorff distance and the merge rely on the
 vertex order, and scan polylines run counter-clockwise around the viewpoint. Both arrays
-are read-only, so a ``Polyline`` can be shared and its derived quantities cached.
+are read-only, so a ``Polyline`` can be shared and its derived quantities cached. Many
+polylines travel together as :class:`PackedPolylines`: a read-only list of them that also
+keeps all their vertices packed in one array for the compiled kernels.
 
 Examples
 --------
@@ -12,13 +14,15 @@ Examples
 (3, 6.0, array([0, 1, 2]))
 >>> as_polyline(line) is line
 True
+>>> as_polylines([line, [[5.0, 0.0], [6.0, 0.0]]]).offsets
+array([0, 3, 5])
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -33,8 +37,7 @@ __all__ = [
     "PackedPolylines",
     "Polyline",
     "as_polyline",
-    "pack_vertices",
-    "run_boxes",
+    "as_polylines",
     "run_offsets",
 ]
 
@@ -109,66 +112,18 @@ class Polyline:
         object.__setattr__(self, "scan_indices", _read_only(indices))
 
     @classmethod
-    def _trusted(cls, points: np.ndarray, scan_indices: np.ndarray) -> Polyline:
-        """Wrap fresh arrays already known valid, skipping the checks (hot paths only).
+    def _view(cls, points: np.ndarray, scan_indices: np.ndarray) -> Polyline:
+        """Wrap read-only arrays already known valid, without the checks (this module only).
 
-        ``points`` must be a finite ``(N, 2)`` float64 array and ``scan_indices`` an
-        ``(N,)`` int64 array, both owned by the new polyline (they are frozen in place).
+        ``points`` must be a finite read-only ``(N, 2)`` float64 array and ``scan_indices``
+        a read-only ``(N,)`` int64 array (views of frozen arrays, typically).
         """
-        points.flags.writeable = False
-        scan_indices.flags.writeable = False
         line = object.__new__(cls)
-        # The frozen dataclass's fields, set as __init__ would without its checks.
-        line.__dict__.update(points=points, scan_indices=scan_indices)
+        # The frozen dataclass's fields, set item by item: as __init__ would without its
+        # checks, and cheaper than an update with keywords (once per polyline of a scan).
+        state = line.__dict__
+        state["points"], state["scan_indices"] = points, scan_indices
         return line
-
-    @classmethod
-    def _split(
-        cls, points: np.ndarray, scan_indices: np.ndarray, bounds: list[int] | np.ndarray
-    ) -> PackedPolylines:
-        """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid arrays.
-
-        The arrays are frozen once and each polyline holds views of them (hot paths only,
-        as :meth:`_trusted`: a whole scan's polylines come out of one array). The boxes of
-        all runs are found in one pass; the result keeps the packed vertices and the boxes
-        for the kernels (:class:`PackedPolylines`).
-        """
-        offsets = np.asarray(bounds, dtype=np.int64)  # (an int64 array as it is)
-        bounds = offsets.tolist()
-        # (The boxes and the kernels' copy first: kernels are compiled for writeable arrays.)
-        boxes = run_boxes(points, offsets)
-        packed = PackedPolylines(points.copy(), offsets, boxes)
-        points.flags.writeable = False
-        scan_indices.flags.writeable = False
-        new = object.__new__
-        lines = []
-        for start, stop in itertools.pairwise(bounds):
-            line = new(cls)
-            # (Item by item: cheaper than an update with keywords, once per scan polyline.)
-            state = line.__dict__
-            state["points"], state["scan_indices"] = points[start:stop], scan_indices[start:stop]
-            lines.append(line)
-        packed.extend(lines)
-        return packed
-
-    @classmethod
-    def _views(
-        cls, points: np.ndarray, bounds: list[int], scan_indices: Sequence[np.ndarray]
-    ) -> list[Polyline]:
-        """Return one polyline per run ``bounds[k]:bounds[k + 1]`` of fresh, valid vertices.
-
-        As :meth:`_split`, but each polyline takes the read-only ``scan_indices[k]`` given
-        (e.g. those of the polyline whose vertices were copied and moved) and no box.
-        """
-        points.flags.writeable = False
-        new = object.__new__
-        lines = []
-        for start, stop, indices in zip(bounds, bounds[1:], scan_indices, strict=False):
-            line = new(cls)
-            state = line.__dict__  # (as in _split)
-            state["points"], state["scan_indices"] = points[start:stop], indices
-            lines.append(line)
-        return lines
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -216,6 +171,18 @@ class Polyline:
         """
         return float(self.edge_lengths.sum())
 
+    def reversed(self) -> Polyline:
+        """Return the polyline traversed the other way (its scan indices reversed too).
+
+        Examples
+        --------
+        >>> backwards = Polyline([[0.0, 0.0], [1.0, 0.0]], scan_indices=[3, 8]).reversed()
+        >>> backwards.points.tolist(), backwards.scan_indices.tolist()
+        ([[1.0, 0.0], [0.0, 0.0]], [8, 3])
+        """
+        # Views of valid read-only arrays: nothing to check or copy.
+        return Polyline._view(self.points[::-1], self.scan_indices[::-1])
+
     def transformed(self, pose: ArrayLike) -> Polyline:
         """Return the polyline mapped from the frame of ``pose`` into its parent frame.
 
@@ -251,94 +218,203 @@ def as_polyline(obj: Polyline | ArrayLike) -> Polyline:
     return Polyline(obj)
 
 
-class PackedPolylines(list):
-    """A list of polylines that are the consecutive runs of one vertex array.
 
-    What :func:`semistatic.extraction.extract_polylines` returns: a plain list of
-    :class:`Polyline` that also keeps, for compiled kernels, all vertices packed
-    (:func:`pack_vertices`) and the bounding boxes (:func:`run_boxes`), so that nothing
-    downstream packs the same scan again.
+class PackedPolylines(list):
+    """Polylines stored one after the other in one vertex array: the package's polyline set.
+
+    The one form in which many polylines travel: a read-only list of :class:`Polyline`
+    (what :func:`semistatic.extraction.extract_polylines` returns, and what every function
+    taking many polylines takes, through :func:`as_polylines`) that also holds all their
+    vertices packed for the compiled kernels, polyline ``k`` being
+    ``points[offsets[k]:offsets[k + 1]]``, with their bounding boxes and scan indices.
+    A scan's polylines are packed once and serve every step of a map update.
 
     Parameters
     ----------
-    points
-        ``(N, 2)`` vertices of all polylines one after the other: a writeable copy the
-        polylines do not share (a kernel may take it, none may write to it).
-    offsets
-        ``(K + 1,)`` int64: polyline ``k`` is ``points[offsets[k]:offsets[k + 1]]``.
-    boxes
-        ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)``.
-    lines
-        The polylines themselves (appended by the producer when not given).
+    polylines
+        Polylines or ``(N, 2)`` arrays (made polylines as :func:`as_polyline` makes them).
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        ``(N, 2)`` C-contiguous float64 vertices of all polylines: the kernels' copy,
+        writeable as the kernels are compiled for (nothing writes to it).
+    offsets : numpy.ndarray
+        ``(K + 1,)`` int64 start of each polyline's vertices in ``points``, and the end.
 
     Examples
     --------
-    >>> points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0]])
-    >>> lines = Polyline._split(points.copy(), np.arange(4), [0, 2, 4])
+    >>> lines = PackedPolylines([[[0.0, 0.0], [1.0, 0.0]], [[2.0, 2.0], [3.0, 2.0]]])
     >>> isinstance(lines, list), len(lines), lines.offsets, lines.boxes[1]
     (True, 2, array([0, 2, 4]), array([2., 2., 3., 2.]))
+    >>> lines.append(Polyline([[0.0, 0.0]]))
+    Traceback (most recent call last):
+    ...
+    TypeError: PackedPolylines is read-only: build a new one from the polylines wanted
     """
 
-    def __init__(
-        self, points: np.ndarray, offsets: np.ndarray, boxes: np.ndarray,
-        lines: Iterable[Polyline] = (),
-    ) -> None:
-        super().__init__(lines)
-        self.points = points
-        self.offsets = offsets
-        self.boxes = boxes
+    __slots__ = ("_boxes", "_scan_indices", "offsets", "points")
 
-
-class PackedPolylineTuple(tuple):
-    """A tuple of polylines that keeps the packed vertices and boxes of its source.
-
-    What :class:`semistatic.mapper.UpdateReport` stores as ``scan_polylines``: a plain
-    tuple to read, that still brings a :class:`PackedPolylines`' ``points``, ``offsets``
-    and ``boxes`` to a later association of the same polylines (no repacking).
-
-    Examples
-    --------
-    >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
-    >>> frozen = PackedPolylineTuple.of(lines)
-    >>> isinstance(frozen, tuple), frozen == tuple(lines), frozen.offsets
-    (True, True, array([0, 2]))
-    """
+    def __init__(self, polylines: Iterable[Polyline | ArrayLike] = ()) -> None:
+        lines = [as_polyline(line) for line in polylines]
+        list.extend(self, lines)
+        vertices = [line.points for line in lines]
+        # (len is the row count: a map over arrays costs no generator frame per polyline.)
+        self.offsets = run_offsets(map(len, vertices), len(vertices))
+        self.points = np.concatenate(vertices) if vertices else np.empty((0, 2))
+        self._boxes: np.ndarray | None = None
+        self._scan_indices: np.ndarray | None = None
 
     @classmethod
-    def of(cls, lines: PackedPolylines) -> PackedPolylineTuple:
-        """Return ``lines`` as a tuple that keeps their packed vertices and boxes."""
-        frozen = cls(lines)
-        frozen.points, frozen.offsets, frozen.boxes = lines.points, lines.offsets, lines.boxes
-        return frozen
+    def from_runs(
+        cls, points: np.ndarray, offsets: ArrayLike, scan_indices: ArrayLike | None = None
+    ) -> PackedPolylines:
+        """Return the polylines that are the consecutive runs of one fresh vertex array.
+
+        For code that makes many polylines at once (a scan's extraction, a merge): polyline
+        ``k`` is ``points[offsets[k]:offsets[k + 1]]``, a view of one read-only copy, so
+        no polyline is copied or checked on its own. ``points`` itself becomes the set's
+        :attr:`points`: it is taken over, write nothing to it afterwards.
+
+        Parameters
+        ----------
+        points
+            ``(N, 2)`` finite float64 vertices.
+        offsets
+            ``(K + 1,)`` non-decreasing integers from 0 to ``N``.
+        scan_indices
+            ``(N,)`` integer scan index of each vertex; default: the vertex order
+            ``0..n-1`` within each polyline.
+
+        Examples
+        --------
+        >>> points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0], [4.0, 2.0]])
+        >>> lines = PackedPolylines.from_runs(points, [0, 2, 5], scan_indices=[7, 8, 1, 2, 3])
+        >>> [line.scan_indices.tolist() for line in lines], lines[1].points[0].tolist()
+        ([[7, 8], [1, 2, 3]], [2.0, 2.0])
+        >>> [len(line) for line in PackedPolylines.from_runs(points, [0, 3, 3, 5])]
+        [3, 0, 2]
+        """
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        offsets = np.asarray(offsets, dtype=np.int64)
+        bounds = offsets.tolist()
+        if not (
+            points.ndim == 2 and points.shape[1] == 2 and offsets.ndim == 1 and bounds
+            and bounds[0] == 0 and bounds[-1] == points.shape[0] and np.isfinite(points).all()
+        ):
+            raise ValueError(
+                "PackedPolylines.from_runs: need finite (N, 2) points and offsets from 0 to "
+                f"N, got points of shape {points.shape} and offsets {bounds}"
+            )
+        if scan_indices is not None:
+            scan_indices = _read_only(np.asarray(scan_indices).astype(np.int64, copy=False))
+            if scan_indices.shape != (points.shape[0],):
+                raise ValueError(
+                    f"PackedPolylines.from_runs: scan_indices has shape {scan_indices.shape}, "
+                    f"points {points.shape[0]} rows; pass one scan index per vertex"
+                )
+        frozen = points.copy()
+        frozen.flags.writeable = False
+        new = object.__new__
+        lines = []
+        for start, stop in itertools.pairwise(bounds):
+            if stop < start:
+                raise ValueError(f"PackedPolylines.from_runs: offsets decrease: {bounds}")
+            # Polyline._view written out: once per polyline of every scan.
+            line = new(Polyline)
+            state = line.__dict__
+            state["points"] = frozen[start:stop]
+            state["scan_indices"] = (
+                _vertex_order(stop - start) if scan_indices is None
+                else scan_indices[start:stop]
+            )
+            lines.append(line)
+        packed = cls.__new__(cls)
+        list.extend(packed, lines)
+        packed.points, packed.offsets = points, offsets
+        packed._boxes, packed._scan_indices = None, scan_indices
+        return packed
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """Return the ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)`` (computed once).
+
+        An empty polyline has the empty box :data:`EMPTY_BOX`. One compiled pass over all
+        vertices, however many polylines; like :attr:`points`, nothing writes to it.
+
+        Examples
+        --------
+        >>> PackedPolylines([[[0.0, 1.0], [2.0, -1.0]], np.empty((0, 2)), [[5.0, 5.0]]]).boxes
+        array([[ 0., -1.,  2.,  1.],
+               [ inf,  inf, -inf, -inf],
+               [ 5.,  5.,  5.,  5.]])
+        """
+        if self._boxes is None:
+            self._boxes = _run_boxes(self.points, self.offsets).reshape(-1, 4)
+        return self._boxes
+
+    @property
+    def scan_indices(self) -> np.ndarray:
+        """Return the ``(N,)`` scan indices of all vertices, packed as :attr:`points` (read-only).
+
+        Examples
+        --------
+        >>> PackedPolylines([Polyline([[0.0, 0.0], [1.0, 0.0]], [4, 6]), [[2.0, 0.0]]]).scan_indices
+        array([4, 6, 0])
+        """
+        if self._scan_indices is None:
+            indices = [line.scan_indices for line in self]
+            self._scan_indices = _read_only(
+                np.concatenate(indices) if indices else np.empty(0, np.int64)
+            )
+        return self._scan_indices
+
+    def __eq__(self, other: object) -> bool:
+        # Equal to a tuple of the same polylines too: what a report held before packing.
+        return list.__eq__(self, list(other) if isinstance(other, tuple) else other)
+
+    def __ne__(self, other: object) -> bool:
+        equal = self.__eq__(other)
+        return equal if equal is NotImplemented else not equal
+
+    def __reduce__(self) -> tuple:
+        return (PackedPolylines, (list(self),))
+
+    def _refuse(self, *args: object, **kwargs: object) -> None:
+        """Refuse to change the list: its polylines are packed with it.
+
+        Examples
+        --------
+        >>> PackedPolylines([[[0.0, 0.0], [1.0, 0.0]]]).pop()
+        Traceback (most recent call last):
+        ...
+        TypeError: PackedPolylines is read-only: build a new one from the polylines wanted
+        """
+        raise TypeError("PackedPolylines is read-only: build a new one from the polylines wanted")
+
+    append = extend = insert = remove = pop = clear = sort = reverse = _refuse
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
 
 
-def frozen_polylines(lines: Sequence[Polyline]) -> tuple[Polyline, ...]:
-    """Return ``lines`` as a tuple, keeping packed vertices and boxes when they have them.
+def as_polylines(obj: PackedPolylines | Iterable[Polyline | ArrayLike]) -> PackedPolylines:
+    """Return ``obj`` as :class:`PackedPolylines` (which pass through unchanged).
+
+    The door of every function that takes many polylines.
+
+    Parameters
+    ----------
+    obj
+        A ``PackedPolylines``, or polylines and ``(N, 2)`` arrays.
 
     Examples
     --------
-    >>> lines = Polyline._split(np.array([[0.0, 0.0], [1.0, 0.0]]), np.arange(2), [0, 2])
-    >>> type(frozen_polylines(lines)).__name__, type(frozen_polylines(list(lines))).__name__
-    ('PackedPolylineTuple', 'tuple')
-    >>> (frozen := frozen_polylines(lines)) is frozen_polylines(frozen)
-    True
+    >>> lines = as_polylines([[[0.0, 0.0], [2.0, 0.0]], Polyline([[1.0, 1.0]])])
+    >>> [line.length for line in lines], as_polylines(lines) is lines
+    ([2.0, 0.0], True)
     """
-    if isinstance(lines, PackedPolylineTuple):
-        return lines  # frozen already (e.g. another map's report of the same scan)
-    if is_packed(lines):
-        return PackedPolylineTuple.of(lines)
-    return tuple(lines)
-
-
-def is_packed(lines: Sequence[Polyline]) -> bool:
-    """Return whether ``lines`` bring packed vertices and boxes (``points``, ``offsets``).
-
-    Examples
-    --------
-    >>> is_packed(Polyline._split(np.zeros((1, 2)), np.arange(1), [0, 1])), is_packed([])
-    (True, False)
-    """
-    return isinstance(lines, (PackedPolylines, PackedPolylineTuple))
+    if isinstance(obj, PackedPolylines):
+        return obj
+    return PackedPolylines(obj)
 
 
 def run_offsets(sizes: Iterable[int], count: int) -> np.ndarray:
@@ -352,45 +428,22 @@ def run_offsets(sizes: Iterable[int], count: int) -> np.ndarray:
     return np.fromiter(itertools.accumulate(sizes, initial=0), np.int64, count + 1)
 
 
-def pack_vertices(vertices: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(N_k, 2)`` vertex arrays one after the other and their :func:`run_offsets`.
-
-    How compiled kernels take many polylines at once: polyline ``k`` is
-    ``points[offsets[k]:offsets[k + 1]]``.
-
-    Examples
-    --------
-    >>> points, offsets = pack_vertices([np.zeros((2, 2)), np.ones((1, 2))])
-    >>> points.shape, offsets
-    ((3, 2), array([0, 2, 3]))
-    """
-    # (len is the row count: a map over arrays costs no generator frame per polyline.)
-    offsets = run_offsets(map(len, vertices), len(vertices))
-    points = np.concatenate(vertices) if vertices else np.empty((0, 2))
-    return points, offsets
+# The scan indices 0..n-1 of polylines whose vertices come from no one scan (a merge's),
+# one read-only array per n, shared by every such polyline of that size.
+_VERTEX_ORDER: dict[int, np.ndarray] = {}
 
 
-def run_boxes(points: np.ndarray, offsets: Sequence[int] | np.ndarray) -> np.ndarray:
-    """Return the ``(K, 4)`` bounding boxes ``(xmin, ymin, xmax, ymax)`` of packed runs.
-
-    Run ``k`` is ``points[offsets[k]:offsets[k + 1]]`` (as :func:`pack_vertices` gives
-    them); an empty run has the empty box :data:`EMPTY_BOX`. One compiled pass over all
-    vertices, however many polylines.
-
-    Examples
-    --------
-    >>> run_boxes(np.array([[0.0, 1.0], [2.0, -1.0], [5.0, 5.0]]), [0, 2, 2, 3])
-    array([[ 0., -1.,  2.,  1.],
-           [ inf,  inf, -inf, -inf],
-           [ 5.,  5.,  5.,  5.]])
-    """
-    offsets = np.asarray(offsets, dtype=np.int64)
-    return _run_boxes(points, offsets).reshape(-1, 4)
+def _vertex_order(count: int) -> np.ndarray:
+    indices = _VERTEX_ORDER.get(count)
+    if indices is None:
+        indices = _VERTEX_ORDER[count] = np.arange(count, dtype=np.int64)
+        indices.flags.writeable = False
+    return indices
 
 
 @numba.njit(cache=True)
 def _run_boxes(points, offsets):  # pragma: no cover - compiled
-    """Return the boxes of :func:`run_boxes`, flat (four values per run)."""
+    """Return the boxes of :attr:`PackedPolylines.boxes`, flat (four values per run)."""
     boxes = np.empty(4 * (offsets.size - 1))
     for run in range(offsets.size - 1):
         xmin, ymin, xmax, ymax = math.inf, math.inf, -math.inf, -math.inf

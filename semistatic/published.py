@@ -10,8 +10,8 @@ results of this code: RMSE along each ray (the metric of :mod:`semistatic.evalua
 at J vertices per scan, and the coverage f published with them.
 
 :func:`published_rmse` reads a curve at our vertex count: linearly interpolated between
-the published J, the J = 50 figure where we store more vertices (the comparison the
-acceptance of issue 10 asks for), the J = 10 figure below.
+the published J, the J = 50 figure where we store more vertices (so that we compare
+against their best figure), the J = 10 figure below.
 
 Examples
 --------

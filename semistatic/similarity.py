@@ -8,7 +8,7 @@ keeps turning left has an increasing ``T`` without 2 pi jumps. The similarity is
     s(P0, P1) = (integral (T1 - T0 - theta_0)^2 ds) * max(l1 / l0, l0 / l1),
     theta_0 = integral (T1 - T0) ds,
 
-where ``theta_0`` is the rotation that minimises the integral (DESIGN.md detail 4; the
+where ``theta_0`` is the rotation that minimises the integral (docs/design.md#detail-4; the
 paper's ``+ theta_0`` is read as this minimiser). The integral is exact: both step
 functions are constant between consecutive breakpoints of their union. ``s`` is 0 for
 rigidly moved copies, grows with shape difference and with length ratio, and is
@@ -19,8 +19,8 @@ their tangent function is empty and their similarity to anything is ``inf``, so 
 association never picks them on shape.
 
 One compiled kernel (numba) builds a tangent function and one takes the similarity of
-two, whatever the size; other kernels call both (:func:`tangent_compiled`,
-:func:`tangent_similarity_compiled`).
+two, whatever the size; :func:`similarity` of two polyline sets runs both on every pair in
+one call.
 
 Examples
 --------
@@ -40,14 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from semistatic.frames import wrap_angle_compiled
-from semistatic.polyline import Polyline, as_polyline
+from semistatic.polyline import PackedPolylines, Polyline, as_polyline
 
 __all__ = [
-    "integral_compiled",
     "similarity",
-    "tangent_compiled",
     "tangent_function",
-    "tangent_similarity_compiled",
 ]
 
 # Polylines are immutable, so a polyline's tangent function is computed once and kept in
@@ -71,24 +68,17 @@ def _tangent(polyline: Polyline | ArrayLike) -> _Tangent:
 
 
 def _compute_tangent(points: np.ndarray) -> _Tangent:
-    breaks, angles, total = tangent_compiled(np.array(points, dtype=np.float64, order="C"))
+    breaks, angles, total = _tangent_of(np.array(points, dtype=np.float64, order="C"))
     breaks.flags.writeable = False
     angles.flags.writeable = False
     return breaks, angles, total
 
 
 @numba.njit(cache=True)
-def tangent_compiled(points):  # pragma: no cover - compiled
-    """Return ``(breaks, angles, length)`` of ``(N, 2)`` vertices, inside compiled kernels.
+def _tangent_of(points):  # pragma: no cover - compiled
+    """Return ``(breaks, angles, length)`` of ``(N, 2)`` C-contiguous float64 vertices.
 
-    :func:`tangent_function` and the length, for kernels that compare many polylines
-    (C-contiguous float64 vertices; no checks).
-
-    Examples
-    --------
-    >>> breaks, angles, length = tangent_compiled(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 3.0]]))
-    >>> breaks, angles.round(4), length
-    (array([0.  , 0.25, 1.  ]), array([0.    , 1.5708]), 4.0)
+    :func:`tangent_function` and the length.
     """
     count = max(points.shape[0] - 1, 0)
     lengths = np.empty(count)
@@ -124,19 +114,8 @@ def tangent_compiled(points):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def integral_compiled(breaks0, angles0, breaks1, angles1):  # pragma: no cover - compiled
-    """Return ``integral (T1 - T0 - theta_0)^2 ds`` of two tangent functions (compiled).
-
-    The integral of :func:`similarity` before its length ratio, for kernels that compare
-    many polylines (tangent functions from :func:`tangent_compiled`).
-
-    Examples
-    --------
-    >>> straight = tangent_compiled(np.array([[0.0, 0.0], [2.0, 0.0]]))
-    >>> corner = tangent_compiled(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]))
-    >>> round(integral_compiled(*straight[:2], *corner[:2]), 4)  # (pi / 4)^2
-    0.6169
-    """
+def _integral(breaks0, angles0, breaks1, angles1):  # pragma: no cover - compiled
+    """Return ``integral (T1 - T0 - theta_0)^2 ds`` of two tangent functions."""
     # Between consecutive breakpoints of the union both step functions are constant; a
     # repeated breakpoint only adds an interval of zero width. On [u_k, u_k+1) edge j of a
     # polyline applies when j of its inner breaks are at or before u_k.
@@ -203,44 +182,39 @@ def tangent_function(polyline: Polyline | ArrayLike) -> tuple[np.ndarray, np.nda
 
 
 @numba.njit(cache=True)
-def tangent_similarity_compiled(
+def _tangent_similarity(
     breaks0, angles0, length0, breaks1, angles1, length1
 ):  # pragma: no cover - compiled
-    """Return :func:`similarity` of two tangent functions and their lengths (compiled).
+    """Return :func:`similarity` of two tangent functions and their lengths.
 
-    The integral of :func:`integral_compiled` times the length ratio; ``inf`` when either
-    length is 0 (no shape). :func:`similarity` and the kernels that compare many polylines
-    (tangent functions from :func:`tangent_compiled`) both take it from here.
-
-    Examples
-    --------
-    >>> straight = tangent_compiled(np.array([[0.0, 0.0], [2.0, 0.0]]))
-    >>> corner = tangent_compiled(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]))
-    >>> round(tangent_similarity_compiled(*straight, *corner), 4)  # (pi / 4)^2, equal lengths
-    0.6169
-    >>> tangent_similarity_compiled(*straight, *tangent_compiled(np.zeros((1, 2))))
-    inf
+    The integral of :func:`_integral` times the length ratio; ``inf`` when either length
+    is 0 (no shape).
     """
     if length0 == 0.0 or length1 == 0.0:
         return math.inf
-    integral = integral_compiled(breaks0, angles0, breaks1, angles1)
+    integral = _integral(breaks0, angles0, breaks1, angles1)
     return integral * max(length1 / length0, length0 / length1)
 
 
-def similarity(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
+def similarity(
+    p0: Polyline | ArrayLike | PackedPolylines, p1: Polyline | ArrayLike | PackedPolylines
+) -> float | np.ndarray:
     """Return the shape similarity ``s(P0, P1)`` of eq. (1); 0 means the same shape.
 
     Parameters
     ----------
     p0, p1
-        Polylines (or ``(N, 2)`` arrays) traversed in the same direction.
+        Polylines (or ``(N, 2)`` arrays) traversed in the same direction; or two
+        :class:`~semistatic.polyline.PackedPolylines` of equal length, compared element by
+        element in one compiled call (as shapely's functions take arrays of geometries).
 
     Returns
     -------
-    float
+    float or numpy.ndarray
         ``(integral (T1 - T0 - theta_0)^2 ds) * max(l1 / l0, l0 / l1) >= 0``, with
         ``theta_0`` the mean of ``T1 - T0`` (the minimising rotation). ``inf`` when either
-        polyline has zero length (fewer than two distinct vertices).
+        polyline has zero length (fewer than two distinct vertices). For two sets, the
+        ``(K,)`` similarities of their pairs.
 
     Examples
     --------
@@ -252,5 +226,24 @@ def similarity(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike) -> float:
     2.4674
     >>> similarity(wall, [[1.0, 1.0]])
     inf
+    >>> similarity(PackedPolylines([left, wall]), PackedPolylines([right, wall])).round(4)
+    array([2.4674, 0.    ])
     """
-    return tangent_similarity_compiled(*_tangent(p0), *_tangent(p1))
+    if isinstance(p0, PackedPolylines) and isinstance(p1, PackedPolylines):
+        if len(p0) != len(p1):
+            raise ValueError(
+                f"similarity: two polyline sets must be as long, got {len(p0)} and {len(p1)}"
+            )
+        return _similarities(p0.points, p0.offsets, p1.points, p1.offsets)
+    return _tangent_similarity(*_tangent(p0), *_tangent(p1))
+
+
+@numba.njit(cache=True)
+def _similarities(points0, offsets0, points1, offsets1):  # pragma: no cover - compiled
+    """Return the similarity of each pair of packed polylines ``k`` of both sides."""
+    values = np.empty(offsets0.size - 1)
+    for k in range(values.size):
+        breaks0, angles0, length0 = _tangent_of(points0[offsets0[k] : offsets0[k + 1]])
+        breaks1, angles1, length1 = _tangent_of(points1[offsets1[k] : offsets1[k + 1]])
+        values[k] = _tangent_similarity(breaks0, angles0, length0, breaks1, angles1, length1)
+    return values

@@ -1,36 +1,33 @@
-"""What a laser scan can see of a polyline: expected ranges, visibility and biased ends.
+"""What a laser scan sees of map polylines: visibility, free space, and unbiased ends.
 
 Two parts of the mapper reason about single beams rather than whole polylines:
 
-- the object life cycle (DESIGN.md detail 10) deletes a map polyline only after it was
-  missed while it *should have been visible*: :func:`expected_ranges` casts the scan's
-  beams at the polyline, :func:`visible_beams` counts those in view, unoccluded and seen
-  through, and :func:`should_be_visible` / :func:`is_missing` decide;
-- :func:`extend_ends` removes the bias of a scan polyline's ends, which the last beam on
-  an object leaves up to half a beam gap short of its true end;
-- :func:`free_space_cut` removes the parts of a map polyline that the scan reads through
-  (an object moved along its own face: the map's ends agree with the scan, its middle
-  does not).
+- :func:`visibility` casts the scan's beams at map polylines and compares each beam's
+  reading with the range at which it would hit them. The object life cycle
+  (docs/design.md#detail-10) deletes a map polyline only after it was missed while it
+  *should have been visible*: in view, unoccluded, and read through
+  (``Visibility.missing``). Where only part of a polyline is read through, that part is
+  free space (an object moved along its own face: the map's ends agree with the scan,
+  its middle does not): the free-space cut removes it (``Visibility.pieces``);
+- :func:`extend_ends` removes the bias of scan polylines' ends, which the last beam on an
+  object leaves up to half a beam gap short of its true end.
 
-The beams are cast in compiled kernels (numba). The mapper checks all the map polylines
-of an update in one call (:func:`missed_and_cut`, :func:`missing_polylines`,
-:func:`extend_all_ends`); the single-polyline functions are the same call for one.
+Both take a set of polylines and cast all beams in one compiled call (numba).
 
 Examples
 --------
 >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
->>> wall = [[2.0, -1.0], [2.0, 1.0]]
->>> visible_beams(wall, scan, (0.0, 0.0, 0.0))  # all 21 beams would hit it, none do
-BeamCounts(in_view=21, unoccluded=21, seen_through=21)
->>> is_missing(wall, scan, (0.0, 0.0, 0.0), MapperParams())
-True
+>>> seen = visibility([[[2.0, -1.0], [2.0, 1.0]]], scan, (0.0, 0.0, 0.0), MapperParams())
+>>> seen.in_view, seen.seen_through, seen.missing  # all 21 beams would hit it, none do
+(array([21]), array([21]), array([ True]))
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -38,25 +35,17 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import untransform_points
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline, as_polyline, pack_vertices
+from semistatic.polyline import PackedPolylines, Polyline, as_polylines
 from semistatic.types import Scan, beam_directions
 
 __all__ = [
     "MAX_END_EXTENSION",
+    "MIN_SEEN_THROUGH",
     "MIN_VISIBLE_FRACTION",
     "MISSING_FRACTION",
-    "BeamCounts",
-    "cuts_and_misses",
-    "expected_ranges",
-    "extend_all_ends",
+    "Visibility",
     "extend_ends",
-    "free_space_cut",
-    "free_space_cuts",
-    "is_missing",
-    "missed_and_cut",
-    "missing_polylines",
-    "should_be_visible",
-    "visible_beams",
+    "visibility",
 ]
 
 # A map polyline should have been visible when at least this fraction of the beams that
@@ -71,7 +60,7 @@ MISSING_FRACTION = 0.5
 # Beams (nearly) parallel to an edge do not hit it.
 PARALLEL_TOLERANCE = 1e-12
 
-# Consecutive beams that must read through a map polyline before free_space_cut removes
+# Consecutive beams that must read through a map polyline before the free-space cut removes
 # that part: two, the fewest readings that make a polyline (MapperParams.min_points), so
 # one noisy reading cuts nothing.
 MIN_SEEN_THROUGH = 2
@@ -81,38 +70,23 @@ MIN_SEEN_THROUGH = 2
 MAX_END_EXTENSION = 0.10
 
 
-def expected_ranges(points: ArrayLike, angles: ArrayLike) -> np.ndarray:
-    """Return the range at which each beam would first hit a polyline (``inf``: no hit).
+def _point_ranges(points: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Return the range at which each beam would hit a polyline of fewer than two vertices.
 
-    Parameters
-    ----------
-    points
-        ``(N, 2)`` polyline vertices in the sensor frame. A single vertex is hit only by
-        the beam whose direction is nearest to it (within half a beam step).
-    angles
-        ``(B,)`` beam angles (rad) in the sensor frame, increasing.
-
-    Examples
-    --------
-    >>> expected_ranges([[2.0, -1.0], [2.0, 1.0]], [-np.pi / 8, 0.0, np.pi / 2]).round(3)
-    array([2.165, 2.   ,   inf])
+    ``points``: ``(N, 2)`` vertices in the sensor frame, ``N <= 1``; a single vertex is
+    hit only by the beam whose direction is nearest to it (within half a beam step), at
+    its distance (``inf``: no hit). ``angles``: ``(B,)`` increasing beam angles (rad) in
+    the sensor frame.
     """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
-    angles = np.asarray(angles, dtype=float).reshape(-1)
     ranges = np.full(angles.size, math.inf)
     if points.shape[0] == 0 or angles.size == 0:
         return ranges
-    if points.shape[0] == 1:
-        bearing = math.atan2(points[0, 1], points[0, 0])
-        beam = int(np.argmin(np.abs(np.angle(np.exp(1j * (angles - bearing))))))
-        step = float(np.median(np.diff(angles))) if angles.size > 1 else math.inf
-        if abs(math.remainder(angles[beam] - bearing, 2.0 * math.pi)) <= 0.5 * step:
-            ranges[beam] = float(np.hypot(points[0, 0], points[0, 1]))
-        return ranges
-    return _first_ranges(
-        np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
-        np.cos(angles), np.sin(angles),
-    )
+    bearing = math.atan2(points[0, 1], points[0, 0])
+    beam = int(np.argmin(np.abs(np.angle(np.exp(1j * (angles - bearing))))))
+    step = float(np.median(np.diff(angles))) if angles.size > 1 else math.inf
+    if abs(math.remainder(angles[beam] - bearing, 2.0 * math.pi)) <= 0.5 * step:
+        ranges[beam] = float(np.hypot(points[0, 0], points[0, 1]))
+    return ranges
 
 
 @numba.njit(cache=True)
@@ -156,26 +130,14 @@ def _first_crossing(
     return best, arcs[best_edge] + best_fraction * length, to_end, sine
 
 
-@numba.njit(cache=True)
-def _first_ranges(
-    xs: np.ndarray, ys: np.ndarray, cos: np.ndarray, sin: np.ndarray
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Return :func:`expected_ranges` of ``N >= 2`` vertices for beam directions (cos, sin)."""
-    arcs = _arc_positions(xs, ys)
-    ranges = np.empty(cos.size)
-    for beam in range(cos.size):
-        ranges[beam] = _first_crossing(xs, ys, arcs, cos[beam], sin[beam])[0]
-    return ranges
-
-
 def extend_ends(
-    polyline: Polyline | ArrayLike,
+    polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
     angle_increment: float,
     *,
     viewpoint: ArrayLike = (0.0, 0.0),
     limit: float = MAX_END_EXTENSION,
-) -> Polyline:
-    """Return a scan polyline with each end moved half a beam gap outward.
+) -> PackedPolylines:
+    """Return scan polylines with each end moved half a beam gap outward.
 
     The last beam that hits an object stops short of its true end, which lies somewhere
     before the next beam would have crossed the object's edge line: on average half that
@@ -183,77 +145,202 @@ def extend_ends(
     for 0.5 deg beams), so maps built from raw ends shrink objects by half of it. Moving
     each end along its edge by half the gap to the neighbouring beam (at most ``limit``)
     removes that bias; an end cut by an occluder or the field of view is only extended
-    along a surface that goes on anyway.
+    along a surface that goes on anyway. A polyline of fewer than two vertices, or an end
+    edge of zero length, stays as it is.
 
     Parameters
     ----------
-    polyline
-        Scan polyline in scan (counter-clockwise) order, in any frame.
+    polylines
+        Scan polylines of one scan, each in scan (counter-clockwise) order, in any frame.
     angle_increment
         Beam step of the scan (rad).
     viewpoint
-        Sensor position ``(x, y)`` (a pose's heading is ignored) in the polyline's frame;
-        default the origin, i.e. a polyline in the sensor frame.
+        Sensor position ``(x, y)`` (a pose's heading is ignored) in the polylines' frame;
+        default the origin, i.e. polylines in the sensor frame.
     limit
         Largest extension (m).
+
+    Returns
+    -------
+    PackedPolylines
+        The polylines with their ends moved, scan indices kept.
 
     Examples
     --------
     >>> wall = [[2.0, 0.0], [2.0, 1.0]]  # seen head-on from the origin
-    >>> extend_ends(wall, np.radians(1.0)).points.round(4)
-    array([[ 2.    , -0.0175],
-           [ 2.    ,  1.022 ]])
+    >>> [line.points.round(4).tolist() for line in extend_ends([wall, [[1.0, 1.0]]],
+    ...                                                        np.radians(1.0))]
+    [[[2.0, -0.0175], [2.0, 1.022]], [[1.0, 1.0]]]
     """
-    return extend_all_ends([as_polyline(polyline)], angle_increment, viewpoint=viewpoint,
-                           limit=limit)[0]
+    lines = as_polylines(polylines)
+    origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
+    points = lines.points.copy()  # the ends move in place
+    _extended_ends(points, lines.offsets, angle_increment, origin_x, origin_y, limit)
+    # Finite vertices moved by finite shifts: a fresh array of valid polylines.
+    return PackedPolylines.from_runs(points, lines.offsets, lines.scan_indices)
 
 
-def extend_all_ends(
-    polylines: Sequence[Polyline],
-    angle_increment: float,
-    *,
-    viewpoint: ArrayLike = (0.0, 0.0),
-    limit: float = MAX_END_EXTENSION,
-    packed: tuple[np.ndarray, np.ndarray] | None = None,
-) -> list[Polyline]:
-    """Return :func:`extend_ends` of many scan polylines of one scan, in one compiled call.
-
-    A polyline whose ends do not move is returned as itself. ``packed``, when given, is
-    :func:`semistatic.polyline.pack_vertices` of ``polylines`` (e.g. a
-    :class:`~semistatic.polyline.PackedPolylines`'), read, never written.
+@dataclass(frozen=True, eq=False)
+class Visibility:
+    """What one scan saw of each of a set of map polylines (see :func:`visibility`).
 
     Examples
     --------
-    >>> lines = [Polyline([[2.0, 0.0], [2.0, 1.0]]), Polyline([[1.0, 1.0]])]
-    >>> [line.points.round(4).tolist() for line in extend_all_ends(lines, np.radians(1.0))]
-    [[[2.0, -0.0175], [2.0, 1.022]], [[1.0, 1.0]]]
+    >>> seen = Visibility(np.array([10]), np.array([8]), np.array([1]), [None], min_points=2)
+    >>> seen.missing
+    array([False])
     """
-    if not polylines:
-        return []
-    origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
-    if packed is None:
-        points, offsets = pack_vertices([line.points for line in polylines])
-    else:
-        points, offsets = packed[0].copy(), packed[1]  # the ends move in place
-    moved = _extended_ends(points, offsets, angle_increment, origin_x, origin_y, limit)
-    # Finite vertices moved by a finite shift: nothing to check.
-    views = Polyline._views(points, offsets.tolist(), [line.scan_indices for line in polylines])
-    return [
-        view if shifted else line
-        for line, view, shifted in zip(polylines, views, moved.tolist(), strict=True)
-    ]
+
+    in_view: np.ndarray
+    """``(K,)`` beams that would hit each polyline within the usable range."""
+    unoccluded: np.ndarray
+    """Of those, the beams that read at least about the expected range."""
+    seen_through: np.ndarray
+    """Of those, the beams that read clearly beyond it (or no return): it is not there."""
+    pieces: list[PackedPolylines | None]
+    """What the free-space cut leaves of each polyline, ``None`` where it cuts nothing."""
+    min_points: int
+    """The fewest unoccluded beams in which a polyline counts as visible."""
+
+    @cached_property
+    def missing(self) -> np.ndarray:
+        """Return which polylines should have been seen, and the scan reads through them.
+
+        A polyline should have been visible (docs/design.md#detail-10) when at least
+        ``min_points`` beams, and at least ``MIN_VISIBLE_FRACTION`` of the beams in view,
+        see it unoccluded; it is missing when moreover most (``MISSING_FRACTION``) of its
+        unoccluded beams read clearly beyond it. A polyline the scan reads right where it
+        is has not gone, even when the association failed to pair it (a box first seen
+        from one side and now from another, a partial view the gate rejects): counting
+        that as a miss would delete an object that is still there.
+
+        Examples
+        --------
+        >>> Visibility(np.array([10, 10, 10]), np.array([8, 8, 4]), np.array([1, 6, 4]),
+        ...            [None] * 3, min_points=2).missing  # there, gone, hidden behind
+        array([False,  True, False])
+        """
+        needed = np.maximum(self.min_points, np.ceil(MIN_VISIBLE_FRACTION * self.in_view))
+        visible = (self.unoccluded > 0) & (self.unoccluded >= needed)
+        return visible & (self.seen_through >= MISSING_FRACTION * self.unoccluded)
+
+
+def visibility(
+    polylines: PackedPolylines | Sequence[Polyline | ArrayLike],
+    scan: Scan,
+    pose: ArrayLike,
+    params: MapperParams,
+    *,
+    cut: bool = True,
+) -> Visibility:
+    """Return what ``scan``, taken from ``pose``, saw of each map polyline.
+
+    A beam is *in view* of a polyline when it would hit it within ``[range_min,
+    min(range_max, params.max_range)]``. It is *unoccluded* when, moreover, the scan read
+    at least about that range, ``r >= expected - margin``, and it *sees through* the
+    polyline when it read clearly beyond it, ``r > expected + margin`` (``inf``, no
+    return, counts for both), ``margin`` being ``params.visibility_margin``. A ``nan``
+    reading tells nothing and counts as occluded.
+
+    With ``cut``, the free-space cut: where at least ``MIN_SEEN_THROUGH`` consecutive beams
+    see through a polyline, the space there is free, and the polyline is cut from half way
+    to the crossing of the beam before that run to half way to the crossing of the beam
+    after it (to its end where that beam misses it). It works at the scale of the
+    association gate (``params.gate``), below which the mapper follows a change by
+    merging: only a span at least the gate wide is cut (one beam, noise or a person
+    walking cut nothing), and a piece shorter than the gate left between cuts goes with
+    them. The polyline is known to within ``params.epsilon`` across, so a beam counts only
+    if it would read through it wherever it lay within that: crossing an edge farther than
+    ``epsilon / tan(angle)`` from the edge's ends, reading beyond it by
+    ``epsilon / sin(angle)`` more than the margin, and passing every vertex by ``epsilon``
+    or more (a grazing beam, or one passing a corner by a centimetre, cuts nothing). The
+    same beams make a polyline read through almost everywhere missing; the cut removes the
+    part of one that is still there elsewhere (an object moved along its own face, a door
+    that opened in a wall). Polylines of fewer than two vertices are cut nowhere.
+
+    Parameters
+    ----------
+    polylines
+        Map polylines in the frame of ``pose``.
+    scan
+        The scan (ranges and beam angles are used).
+    pose
+        Sensor pose ``(x, y, theta)`` in the map frame.
+    params
+        ``max_range``, ``visibility_margin``, ``min_points``, ``epsilon`` and ``gate``
+        are used.
+    cut
+        Whether to find the free-space cuts (else every ``pieces`` entry is ``None``).
+
+    Returns
+    -------
+    Visibility
+        The beam counts of each polyline, which are missing, and the free-space cut's
+        pieces (in each polyline's order, scan indices the vertex order; possibly none).
+
+    Examples
+    --------
+    >>> wall = [[2.0, -1.0], [2.0, 1.0]]  # a wall 2 m ahead; beams 0.1 rad apart
+    >>> angles = np.arange(-0.4, 0.45, 0.1)
+    >>> ranges = 2.0 / np.cos(angles)
+    >>> ranges[5:7] = 4.0  # two beams read through it, 0.2 and 0.4 m left of centre
+    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
+    >>> seen = visibility([wall, [[9.0, -1.0], [9.0, 1.0]]], scan, (0.0, 0.0, 0.0),
+    ...                   MapperParams())
+    >>> [piece.points.round(3).tolist() for piece in seen.pieces[0]], seen.pieces[1]
+    ([[[2.0, -1.0], [2.0, 0.1]], [[2.0, 0.512], [2.0, 1.0]]], None)
+    >>> seen.in_view, seen.unoccluded, seen.seen_through  # the far wall: behind the near one
+    (array([9, 3]), array([9, 0]), array([2, 0]))
+    >>> seen.missing
+    array([False, False])
+    """
+    lines = as_polylines(polylines)
+    x, y, theta = np.asarray(pose, dtype=float).reshape(3).tolist()
+    limit = min(scan.range_max, params.max_range)
+    margin = params.visibility_margin
+    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
+    counts, piece_counts, spans = _through_polylines(
+        lines.points, lines.offsets, x, y, theta, scan.ranges, cos, sin, scan.angle_min,
+        scan.angle_increment, scan.range_min, limit, margin, params.epsilon, params.gate,
+        cut,
+    )
+    for k in np.flatnonzero(np.diff(lines.offsets) < 2).tolist():
+        counts[k] = _point_counts(lines[k], scan, pose, limit, margin)
+    pieces, stored = [], 0
+    spans = spans.tolist()
+    for line, number in zip(lines, piece_counts.tolist(), strict=True):
+        if number < 0:
+            pieces.append(None)
+            continue
+        pieces.append(PackedPolylines(
+            [_arc_piece(line, low, high) for low, high in spans[stored : stored + number]]
+        ))
+        stored += number
+    return Visibility(counts[:, 0], counts[:, 1], counts[:, 2], pieces, params.min_points)
+
+
+def _point_counts(
+    line: Polyline, scan: Scan, pose: ArrayLike, limit: float, margin: float
+) -> tuple[int, int, int]:
+    """Return the beam counts of a polyline of fewer than two vertices."""
+    points = untransform_points(pose, line.points)
+    expected = _point_ranges(points, scan.angles())
+    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= limit)
+    with np.errstate(invalid="ignore"):
+        unoccluded = in_view & (scan.ranges >= expected - margin)
+        seen_through = unoccluded & (scan.ranges > expected + margin)
+    return int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum())
 
 
 @numba.njit(cache=True)
 def _extended_ends(
     points: np.ndarray, offsets: np.ndarray, angle_increment: float, origin_x: float,
     origin_y: float, limit: float,
-) -> np.ndarray:  # pragma: no cover - compiled
-    """Move the ends of the polylines packed in ``points`` (in place); return which moved.
+) -> None:  # pragma: no cover - compiled
+    """Move the ends of the polylines packed in ``points`` in place (:func:`extend_ends`).
 
-    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]``; see :func:`extend_ends`.
+    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]``.
     """
-    moved = np.zeros(offsets.size - 1, np.bool_)
     for p in range(offsets.size - 1):
         first, last = offsets[p], offsets[p + 1] - 1
         if last - first < 1:
@@ -282,157 +369,24 @@ def _extended_ends(
             shift = min(0.5 * along_edge, limit)  # half the gap to that beam, at most limit
             if shift > 0.0:
                 points[end, 0], points[end, 1] = x + shift * outward_x, y + shift * outward_y
-                moved[p] = True
-    return moved
-
-
-class BeamCounts(NamedTuple):
-    """Beams of one scan that concern one map polyline (see :func:`visible_beams`).
-
-    Examples
-    --------
-    >>> BeamCounts(in_view=10, unoccluded=8, seen_through=1).unoccluded
-    8
-    """
-
-    in_view: int
-    """Beams that would hit the polyline within the usable range."""
-    unoccluded: int
-    """Of those, beams that read at least about the expected range."""
-    seen_through: int
-    """Of those, beams that read clearly beyond it (or no return): it is not there."""
-
-
-def visible_beams(
-    polyline: Polyline | ArrayLike,
-    scan: Scan,
-    pose: ArrayLike,
-    *,
-    max_range: float = math.inf,
-    margin: float = 0.15,
-) -> BeamCounts:
-    """Count the beams of ``scan`` that would hit ``polyline``, unoccluded and seen through.
-
-    A beam is *in view* when it would hit the polyline within ``[range_min,
-    min(range_max, max_range)]``. It is *unoccluded* when, moreover, the scan read at least
-    about that range, ``r >= expected - margin``, and it *sees through* the polyline when
-    it read clearly beyond it, ``r > expected + margin`` (``inf``, no return, counts for
-    both). A ``nan`` reading tells nothing and counts as occluded.
-
-    Parameters
-    ----------
-    polyline
-        Map polyline in the frame of ``pose``.
-    scan
-        The scan (ranges and beam angles are used).
-    pose
-        Sensor pose ``(x, y, theta)`` in the map frame.
-    max_range, margin
-        Mapper range limit and occlusion margin (m).
-
-    Returns
-    -------
-    BeamCounts
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=[1.0, 2.0, 3.0, 3.0], angle_min=-0.15, angle_increment=0.1)
-    >>> tuple(visible_beams([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, 0.0)))
-    (4, 3, 2)
-    """
-    view = _View(scan, pose, min(scan.range_max, max_range), margin, 0.0, 0.0)
-    return _beam_passes([as_polyline(polyline)], view, cut=False)[0][0]
-
-
-class _View(NamedTuple):
-    """What the beam passes compare a polyline with: one scan from one pose, thresholds."""
-
-    scan: Scan
-    pose: ArrayLike
-    limit: float
-    """Largest usable range (m): the scan's and the mapper's."""
-    margin: float
-    epsilon: float
-    gate: float
-
-
-def _mapper_view(scan: Scan, pose: ArrayLike, params: MapperParams) -> _View:
-    """Return the :class:`_View` of the mapper with ``params``."""
-    return _View(
-        scan, pose, min(scan.range_max, params.max_range), params.visibility_margin,
-        params.epsilon, params.gate,
-    )
-
-
-def _beam_passes(
-    lines: Sequence[Polyline], view: _View, *, cut: bool, counted_from: int = 0,
-    packed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-) -> tuple[list[BeamCounts], list[list[tuple[float, float]] | None]]:
-    """Return the polylines' :class:`BeamCounts` and, with ``cut``, their remaining spans.
-
-    One compiled pass over all polylines (:func:`_through_polylines`). The spans are the
-    arc-length intervals :func:`free_space_cut` keeps, ``None`` where nothing is cut.
-    Polylines of fewer than two vertices are cut nowhere; their counts come from
-    :func:`expected_ranges` on every beam. Counts are returned for
-    ``lines[counted_from:]`` only (none when ``counted_from`` is ``len(lines)``).
-    ``packed`` is ``(points, offsets, which)`` when the vertices of ``lines`` are
-    already packed: ``lines[k]`` is run ``which[k]``.
-    """
-    if not lines:
-        return [], []
-    scan = view.scan
-    if packed is None:
-        points, offsets = pack_vertices([line.points for line in lines])
-        which = np.arange(len(lines))
-    else:
-        points, offsets, which = packed
-    x, y, theta = np.asarray(view.pose, dtype=float).reshape(3).tolist()
-    cos, sin = beam_directions(scan.ranges.size, scan.angle_min, scan.angle_increment)
-    counts, piece_counts, pieces = _through_polylines(
-        points, offsets, which, x, y, theta, scan.ranges, cos, sin, scan.angle_min,
-        scan.angle_increment, scan.range_min, view.limit, view.margin, view.epsilon,
-        view.gate, cut,
-    )
-    beam_counts = [
-        BeamCounts(*row) if len(line) >= 2 else _point_counts(line, view)
-        for line, row in zip(lines[counted_from:], counts[counted_from:].tolist(), strict=True)
-    ]
-    spans, stored = [], 0
-    pieces = pieces.tolist()
-    for number in piece_counts.tolist():
-        spans.append(None if number < 0 else pieces[stored : stored + number])
-        stored += max(number, 0)
-    return beam_counts, spans
-
-
-def _point_counts(line: Polyline, view: _View) -> BeamCounts:
-    """Return the :class:`BeamCounts` of a polyline of fewer than two vertices."""
-    scan = view.scan
-    points = untransform_points(view.pose, line.points)
-    expected = expected_ranges(points, scan.angles())
-    in_view = np.isfinite(expected) & (expected >= scan.range_min) & (expected <= view.limit)
-    with np.errstate(invalid="ignore"):
-        unoccluded = in_view & (scan.ranges >= expected - view.margin)
-        seen_through = unoccluded & (scan.ranges > expected + view.margin)
-    return BeamCounts(int(in_view.sum()), int(unoccluded.sum()), int(seen_through.sum()))
 
 
 @numba.njit(cache=True)
 def _through_polylines(
-    points: np.ndarray, offsets: np.ndarray, which: np.ndarray, pose_x: float, pose_y: float,
+    points: np.ndarray, offsets: np.ndarray, pose_x: float, pose_y: float,
     pose_theta: float, ranges: np.ndarray, cos: np.ndarray, sin: np.ndarray,
     angle_min: float, angle_increment: float, range_min: float, limit: float, margin: float,
     epsilon: float, gate: float, cut: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Return the beam counts and free-space cuts of polylines packed in ``points``.
 
-    The ``P`` polylines checked are ``points[offsets[w]:offsets[w + 1]]`` for each ``w``
-    in ``which`` (map frame, sensor at ``pose``). Returns ``(P, 3)`` counts (in view,
+    Polyline ``p`` is ``points[offsets[p]:offsets[p + 1]]`` (map frame, sensor at
+    ``pose``). Returns ``(P, 3)`` counts (in view,
     unoccluded, seen through; zeros for fewer than two vertices), ``(P,)`` piece counts
     (``-1``: not cut, always without ``cut``) and the ``(K, 2)`` arc-length spans of the
     pieces, polyline after polyline.
     """
-    count = which.size
+    count = offsets.size - 1
     beams = ranges.size
     # Filled by loops: np.zeros and np.full of these shapes would each compile library
     # code for this kernel alone at first use.
@@ -448,7 +402,7 @@ def _through_polylines(
     spans = np.empty((beams, 2))
     c, s = math.cos(pose_theta), math.sin(pose_theta)
     for p in range(count):
-        start, size = offsets[which[p]], offsets[which[p] + 1] - offsets[which[p]]
+        start, size = offsets[p], offsets[p + 1] - offsets[p]
         if size < 2:
             continue
         xs, ys = np.empty(size), np.empty(size)
@@ -601,157 +555,6 @@ def _seen_through_spans(
     return found
 
 
-def free_space_cut(
-    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
-) -> list[Polyline]:
-    """Return the parts of a map polyline that ``scan`` does not read through.
-
-    Where at least ``MIN_SEEN_THROUGH`` consecutive beams see through the polyline (read
-    clearly beyond it, as in :func:`visible_beams` with ``params.visibility_margin``), the
-    space there is free: the polyline is cut from half way to the crossing of the beam
-    before that run to half way to the crossing of the beam after it (to its end where
-    that beam misses it).
-
-    It works at the scale of the association gate (``params.gate``), below which the
-    mapper follows a change by merging: only a span at least the gate wide is cut (one
-    beam, noise or a person walking cut nothing), and a piece shorter than the gate left
-    between cuts goes with them. The polyline is known to within ``params.epsilon``
-    across, so a beam counts only if it would read through it wherever it lay within
-    that: crossing an edge farther than ``epsilon / tan(angle)`` from the edge's ends,
-    and reading beyond it by ``epsilon / sin(angle)`` more than the margin, passing every
-    vertex by ``epsilon`` or more (a grazing beam, or one passing a corner by a
-    centimetre, cuts nothing). The same beams make
-    :func:`is_missing` delete a polyline that is read through almost everywhere; this
-    removes the part of one that is still there elsewhere (an object moved along its own
-    face, a door that opened in a wall).
-
-    Parameters
-    ----------
-    polyline
-        Map polyline in the frame of ``pose``.
-    scan
-        The scan (ranges and beam angles are used).
-    pose
-        Sensor pose ``(x, y, theta)`` in the map frame.
-    params
-        ``max_range`` and ``visibility_margin`` are used.
-
-    Returns
-    -------
-    list of Polyline
-        ``[polyline]`` itself when nothing is cut, else the remaining pieces in the
-        polyline's order (scan indices: vertex order), possibly none.
-
-    Examples
-    --------
-    >>> wall = [[2.0, -1.0], [2.0, 1.0]]  # a wall 2 m ahead; beams 0.1 rad apart
-    >>> angles = np.arange(-0.4, 0.45, 0.1)
-    >>> ranges = 2.0 / np.cos(angles)
-    >>> ranges[5:7] = 4.0  # two beams read through it, 0.2 and 0.4 m left of centre
-    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
-    >>> [piece.points.round(3).tolist()
-    ...  for piece in free_space_cut(wall, scan, (0.0, 0.0, 0.0), MapperParams())]
-    [[[2.0, -1.0], [2.0, 0.1]], [[2.0, 0.512], [2.0, 1.0]]]
-    """
-    line = as_polyline(polyline)
-    pieces = free_space_cuts([line], scan, pose, params)[0]
-    return [line] if pieces is None else pieces
-
-
-def missed_and_cut(
-    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams
-) -> list[tuple[bool, list[Polyline]]]:
-    """Return :func:`is_missing` and :func:`free_space_cut` of many polylines at once.
-
-    One compiled pass over all of them: what the mapper checks of every map polyline
-    after an update.
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
-    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
-    >>> [(missing, len(pieces))
-    ...  for missing, pieces in missed_and_cut([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
-    [(True, 0), (False, 1)]
-    """
-    return cuts_and_misses([], polylines, scan, pose, params)[1]
-
-
-def free_space_cuts(
-    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams, *,
-    packed: tuple[np.ndarray, np.ndarray, ArrayLike] | None = None,
-) -> list[list[Polyline] | None]:
-    """Return :func:`free_space_cut` of many polylines in one compiled pass.
-
-    ``None`` stands for a polyline that is cut nowhere (where :func:`free_space_cut`
-    returns ``[polyline]``). ``packed`` is ``(points, offsets, which)`` when the
-    polylines' vertices are already packed (:func:`semistatic.polyline.pack_vertices`,
-    e.g. a whole map's): ``polylines[k]`` is run ``which[k]``.
-
-    Examples
-    --------
-    >>> angles = np.arange(-0.4, 0.45, 0.1)
-    >>> ranges = 2.0 / np.cos(angles)
-    >>> ranges[5:7] = 4.0
-    >>> scan = Scan(ranges=ranges, angle_min=-0.4, angle_increment=0.1)
-    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
-    >>> [None if pieces is None else len(pieces)
-    ...  for pieces in free_space_cuts([wall, far], scan, (0.0, 0.0, 0.0), MapperParams())]
-    [2, None]
-    """
-    return cuts_and_misses(polylines, [], scan, pose, params, packed=packed)[0]
-
-
-def cuts_and_misses(
-    cut: Sequence[Polyline], checked: Sequence[Polyline], scan: Scan, pose: ArrayLike,
-    params: MapperParams, *, packed: tuple[np.ndarray, np.ndarray, ArrayLike] | None = None,
-) -> tuple[list[list[Polyline] | None], list[tuple[bool, list[Polyline]]]]:
-    """Return :func:`free_space_cuts` of ``cut`` and :func:`missed_and_cut` of ``checked``.
-
-    Both in one compiled pass (the mapper's per-scan check of the polylines it merged and
-    of those it did not pair). ``packed`` is ``(points, offsets, which)`` when the
-    vertices of both are already packed: ``[*cut, *checked][k]`` is run ``which[k]``.
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
-    >>> wall, far = Polyline([[2.0, -1.0], [2.0, 1.0]]), Polyline([[9.0, -1.0], [9.0, 1.0]])
-    >>> cuts, checks = cuts_and_misses([far], [wall], scan, (0.0, 0.0, 0.0), MapperParams())
-    >>> cuts, [(missing, len(pieces)) for missing, pieces in checks]
-    ([None], [(True, 0)])
-    """
-    lines = [*cut, *checked]
-    if packed is not None:
-        points, offsets, which = packed
-        packed = (points, offsets, np.asarray(which, dtype=np.int64))
-    counts, spans = _beam_passes(lines, _mapper_view(scan, pose, params), cut=True,
-                                 counted_from=len(cut), packed=packed)
-    pieces = [
-        None if kept is None else [_arc_piece(line, low, high) for low, high in kept]
-        for line, kept in zip(lines, spans, strict=True)
-    ]
-    return pieces[: len(cut)], [
-        (_missing(number, params), [line] if kept is None else kept)
-        for line, number, kept in zip(checked, counts, pieces[len(cut):], strict=True)
-    ]
-
-
-def missing_polylines(
-    polylines: Sequence[Polyline], scan: Scan, pose: ArrayLike, params: MapperParams
-) -> list[bool]:
-    """Return :func:`is_missing` of many polylines, in one compiled pass.
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
-    >>> missing_polylines([Polyline([[2.0, -1.0], [2.0, 1.0]])], scan, (0.0, 0.0, 0.0),
-    ...                   MapperParams())
-    [True]
-    """
-    counts, _ = _beam_passes(polylines, _mapper_view(scan, pose, params), cut=False)
-    return [_missing(number, params) for number in counts]
-
-
 def _arc_piece(line: Polyline, low: float, high: float) -> Polyline:
     """Return the part of ``line`` between arc-length positions ``low < high``."""
     points = line.points
@@ -762,59 +565,3 @@ def _arc_piece(line: Polyline, low: float, high: float) -> Polyline:
     return Polyline(rows)
 
 
-def should_be_visible(
-    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
-) -> bool:
-    """Return whether ``scan`` should have seen ``polyline`` (DESIGN.md detail 10).
-
-    True when at least ``params.min_points`` beams, and at least ``MIN_VISIBLE_FRACTION``
-    of the beams in view, see it unoccluded (:func:`visible_beams` with
-    ``params.max_range`` and ``params.visibility_margin``).
-
-    Examples
-    --------
-    >>> scan = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
-    >>> should_be_visible([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, 0.0), MapperParams())
-    True
-    >>> should_be_visible([[2.0, -1.0], [2.0, 1.0]], scan, (0.0, 0.0, np.pi), MapperParams())
-    False
-    """
-    counts = visible_beams(
-        polyline, scan, pose, max_range=params.max_range, margin=params.visibility_margin
-    )
-    return _visible(counts, params)
-
-
-def _visible(counts: BeamCounts, params: MapperParams) -> bool:
-    needed = max(params.min_points, math.ceil(MIN_VISIBLE_FRACTION * counts.in_view))
-    return counts.unoccluded > 0 and counts.unoccluded >= needed
-
-
-def is_missing(
-    polyline: Polyline | ArrayLike, scan: Scan, pose: ArrayLike, params: MapperParams
-) -> bool:
-    """Return whether ``polyline`` should have been seen and the scan reads through it.
-
-    This is a miss of the life cycle: :func:`should_be_visible`, and most
-    (``MISSING_FRACTION``) of its unoccluded beams read clearly beyond it. A polyline the
-    scan reads right where it is has not gone, even when the association failed to pair
-    it (a box first seen from one side and now from another, a partial view the gate
-    rejects): counting that as a miss would delete an object that is still there.
-
-    Examples
-    --------
-    >>> wall = [[2.0, -1.0], [2.0, 1.0]]
-    >>> far = Scan(ranges=np.full(21, 5.0), angle_min=-0.1, angle_increment=0.01)
-    >>> at_the_wall = Scan(ranges=2.0 / np.cos(far.angles()), angle_min=-0.1,
-    ...                    angle_increment=0.01)
-    >>> is_missing(wall, far, (0.0, 0.0, 0.0), MapperParams())
-    True
-    >>> is_missing(wall, at_the_wall, (0.0, 0.0, 0.0), MapperParams())
-    False
-    """
-    return missing_polylines([as_polyline(polyline)], scan, pose, params)[0]
-
-
-def _missing(counts: BeamCounts, params: MapperParams) -> bool:
-    """Return :func:`is_missing` from the polyline's beam counts."""
-    return _visible(counts, params) and counts.seen_through >= MISSING_FRACTION * counts.unoccluded

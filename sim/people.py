@@ -54,29 +54,15 @@ def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
     >>> [person_position(bob, t).tolist() for t in (1.0, 3.0, 4.5)]
     [[0.5, 0.0], [0.5, 0.0], [0.25, 0.0]]
     """
-    if t < person.start_time:
-        return None
-    route = _route(person)
-    steps = np.hypot(*np.diff(route, axis=0).T)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
-    total = arc[-1]
-    if total <= 0.0:
-        return route[0].copy()
-    walked = person.speed * (t - person.start_time)
-    walked = walked % total if person.loop else min(walked, total)
-    # the segment that contains `walked`; searchsorted keeps zero-length legs harmless
-    leg = int(np.clip(np.searchsorted(arc, walked, side="right") - 1, 0, len(steps) - 1))
-    fraction = 0.0 if steps[leg] == 0.0 else (walked - arc[leg]) / steps[leg]
-    return route[leg] + fraction * (route[leg + 1] - route[leg])
+    position = _Walk(person).position(t)
+    return None if position is None else np.array(position)
 
 
 class _Walk:
-    """One person's route precomputed as floats: ``person_position`` without numpy per call.
+    """One person's route precomputed as floats, walked without numpy per call.
 
     ``People.update`` runs at every physics step; rebuilding the route's arc lengths with
-    numpy each time cost more than the engine's teleport. The arithmetic is that of
-    ``person_position`` (arc lengths from the same numpy calls, then the same float
-    operations), so both give the same positions to the last bit.
+    numpy each time cost more than the engine's teleport.
     """
 
     def __init__(self, person: PersonSpec) -> None:

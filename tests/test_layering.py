@@ -127,28 +127,38 @@ def python_files(*folders):
         yield from sorted((ROOT / folder).rglob("*.py"))
 
 
+def is_private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
 def private_uses(path: Path) -> list[str]:
-    """Private names of other modules a file imports, or reads as ``module._name``."""
+    """Private names of other modules a file imports, or reads as ``module[.sub]._name``.
+
+    Relative imports count as the project's own (``from .merge import _x`` too).
+    """
     tree = ast.parse(path.read_text(), filename=str(path))
     found = []
     modules = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module and \
-                node.module.split(".")[0] in (*PRODUCT_PACKAGES, "tests", "benchmarks"):
-            found += [f"from {node.module} import {alias.name}" for alias in node.names
-                      if alias.name.startswith("_") and not alias.name.startswith("__")]
-            if any(part.startswith("_") and not part.startswith("__")
-                   for part in node.module.split(".")):
-                found.append(f"from {node.module} import ...")
+        if isinstance(node, ast.ImportFrom) and (node.level or (
+                node.module and
+                node.module.split(".")[0] in (*PRODUCT_PACKAGES, "tests", "benchmarks"))):
+            source = "." * node.level + (node.module or "")
+            found += [f"from {source} import {alias.name}" for alias in node.names
+                      if is_private(alias.name)]
+            if any(is_private(part) for part in (node.module or "").split(".")):
+                found.append(f"from {source} import ...")
             modules.update(alias.asname or alias.name for alias in node.names)
         elif isinstance(node, ast.Import):
             modules.update(alias.asname or alias.name.split(".")[0] for alias in node.names
                            if alias.name.split(".")[0] in PRODUCT_PACKAGES)
     for node in ast.walk(tree):
-        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
-                and node.value.id in modules and node.attr.startswith("_")
-                and not node.attr.startswith("__")):
-            found.append(f"{node.value.id}.{node.attr}")
+        if isinstance(node, ast.Attribute) and is_private(node.attr):
+            root = node.value  # the name a chain such as semistatic.merge._x starts from
+            while isinstance(root, ast.Attribute):
+                root = root.value
+            if isinstance(root, ast.Name) and root.id in modules:
+                found.append(ast.unparse(node))
     return found
 
 

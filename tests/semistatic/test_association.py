@@ -2,26 +2,16 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from semistatic.association import (
-    FAR_COST,
-    associate,
-    associate_with_distances,
-    bounding_boxes,
-    box_gaps,
-    orient_ccw,
-    similarity_matrix,
-    sort_ccw,
-)
+from semistatic.association import FAR_COST, associate, box_gap, orient_ccw, sort_ccw
 from semistatic.extraction import extract_polylines
 from semistatic.hausdorff import restricted_hausdorff
-from semistatic.polyline import Polyline
+from semistatic.polyline import PackedPolylines, Polyline
+from semistatic.similarity import similarity
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
@@ -46,9 +36,10 @@ def test_one_to_one_in_order():
 
 def test_distances_are_the_restricted_hausdorff_distances_under_the_gate():
     scans = [shifted(points) for points in OBJECTS]
-    triples = associate_with_distances(scans, OBJECTS, GATE)
-    assert [(i, j) for i, j, _ in triples] == associate(scans, OBJECTS, GATE)
-    for i, j, distance in triples:
+    pairs = associate(scans, OBJECTS, GATE)
+    assert pairs == [(0, 0), (1, 1), (2, 2)]
+    assert len(pairs.distances) == len(pairs)
+    for (i, j), distance in zip(pairs, pairs.distances, strict=True):
         assert distance == pytest.approx(restricted_hausdorff(scans[i], OBJECTS[j]))
         assert distance <= GATE
 
@@ -65,7 +56,7 @@ def test_split_wall_is_many_to_one_in_projection_mode():
     wall_line = np.array([[3.0, -2.0], [3.0, 2.0]])
     lower, upper = [[3.02, -1.9], [3.02, -0.3]], [[3.02, 0.3], [3.02, 1.9]]
     assert associate([lower, upper], [wall_line], GATE, mode="projection") == [(0, 0), (1, 0)]
-    # The paper's vertex restriction cannot shorten a two-vertex wall (DESIGN.md detail 5).
+    # The paper's vertex restriction cannot shorten a two-vertex wall (docs/design.md#detail-5).
     assert associate([lower, upper], [wall_line], GATE, mode="vertex") == []
 
 
@@ -142,12 +133,12 @@ def test_orient_ccw_reverses_clockwise_polylines_only():
     assert orient_ccw(flipped, ORIGIN) is flipped
 
 
-def test_similarity_matrix_prunes_pairs_that_cannot_pass_the_gate():
+def test_pairs_that_cannot_pass_the_gate_are_pruned_whatever_their_shape():
     far = AHEAD_WALL + np.array([5.0, 0.0])
-    costs = similarity_matrix([AHEAD_WALL], [AHEAD_WALL, far], gate=GATE)
-    assert costs[0, 0] == 0.0
-    assert math.isinf(costs[0, 1])
-    assert similarity_matrix([AHEAD_WALL], [AHEAD_WALL, far])[0, 1] == 0.0
+    assert similarity(AHEAD_WALL, far) == 0.0  # the same shape: only the gate tells them apart
+    assert associate([AHEAD_WALL], [AHEAD_WALL, far], GATE) == [(0, 0)]
+    assert associate([AHEAD_WALL], [far, AHEAD_WALL], GATE) == [(0, 1)]
+    assert associate([AHEAD_WALL], [far], GATE) == []
 
 
 def test_pruning_is_sound_box_gap_is_a_lower_bound_of_the_restricted_hausdorff():
@@ -155,7 +146,8 @@ def test_pruning_is_sound_box_gap_is_a_lower_bound_of_the_restricted_hausdorff()
     for _ in range(200):
         p0 = rng.uniform(-2, 2, (rng.integers(1, 5), 2))
         p1 = rng.uniform(-2, 2, (rng.integers(1, 5), 2)) + rng.uniform(-3, 3, 2)
-        gap = box_gaps(bounding_boxes([p0]), bounding_boxes([p1]))[0, 0]
+        boxes = PackedPolylines([p0, p1]).boxes
+        gap = box_gap(boxes, 0, boxes, 1)
         for mode in ("vertex", "projection"):
             assert gap <= restricted_hausdorff(p0, p1, mode=mode) + 1e-9
 
@@ -163,7 +155,7 @@ def test_pruning_is_sound_box_gap_is_a_lower_bound_of_the_restricted_hausdorff()
 def test_far_cost_dominates_plausible_similarities():
     corner = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]
     long_wall = [[0.0, 0.0], [40.0, 0.0]]
-    assert similarity_matrix([corner], [long_wall])[0, 0] < FAR_COST / 1e3
+    assert similarity(corner, long_wall) < FAR_COST / 1e3
 
 
 @pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
@@ -171,8 +163,8 @@ def test_nasty_polylines_go_through_associate(name):
     nasty = NASTY_POLYLINES[name]
     for scans, maps in (([nasty], OBJECTS), (OBJECTS, [nasty]), ([nasty], [nasty])):
         for mode in ("vertex", "projection"):
-            triples = associate_with_distances(scans, maps, GATE, viewpoint=ORIGIN, mode=mode)
-            for i, j, distance in triples:
+            pairs = associate(scans, maps, GATE, viewpoint=ORIGIN, mode=mode)
+            for (i, j), distance in zip(pairs, pairs.distances, strict=True):
                 assert 0 <= i < len(scans)
                 assert 0 <= j < len(maps)
                 assert distance <= GATE
@@ -204,12 +196,11 @@ polylines = st.lists(st.tuples(coordinates, coordinates), min_size=0, max_size=5
 @settings(max_examples=60, deadline=None)
 @given(scans=st.lists(polylines, max_size=5), maps=st.lists(polylines, max_size=5))
 def test_pairs_are_monotone_valid_and_under_the_gate(scans, maps):
-    triples = associate_with_distances(scans, maps, 0.5)
-    pairs = [(i, j) for i, j, _ in triples]
+    pairs = associate(scans, maps, 0.5)
     assert pairs == sorted(pairs)
     assert [j for _, j in pairs] == sorted(j for _, j in pairs)  # the path is monotone
     assert len(set(pairs)) == len(pairs)
-    for i, j, distance in triples:
+    for (i, j), distance in zip(pairs, pairs.distances, strict=True):
         assert 0 <= i < len(scans)
         assert 0 <= j < len(maps)
         assert distance == pytest.approx(restricted_hausdorff(scans[i], maps[j]))

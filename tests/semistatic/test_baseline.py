@@ -4,12 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from semistatic.baseline import (
-    COLLINEAR_TOLERANCE,
-    _split,
-    extract_split_and_merge,
-    split_and_merge,
-)
+from semistatic.baseline import COLLINEAR_TOLERANCE, extract_split_and_merge, split_and_merge
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.params import MapperParams
 from semistatic.types import Scan
@@ -88,8 +83,19 @@ def test_budget_mode_splits_the_worst_section_first():
 
 def test_merge_removes_a_vertex_the_split_left_behind():
     points = np.array([[0.0, 1.5], [0.2, 3.3], [0.3, 2.6], [1.1, 2.8], [1.6, 3.6], [1.7, 3.3]])
-    assert _split(points, 0.5, math.inf) == [0, 1, 2, 5]
+    # The split alone keeps 0, 1, 2, 5 (by the reference): point 1 is the farthest from the
+    # chord 0-5, point 2 from the chord 1-5, and the chord 2-5 fits within 0.5.
+    def farthest(first, last):
+        return max(range(first + 1, last),
+                   key=lambda k: line_deviation(points[[first, k, last]], 0, 2))
+
+    assert farthest(0, 5) == 1
+    assert line_deviation(points, 0, 5) > 0.5
+    assert farthest(1, 5) == 2
+    assert line_deviation(points, 1, 5) > 0.5
+    assert line_deviation(points, 2, 5) <= 0.5
     # Point 1 lies within 0.5 of the line through points 0 and 2: collinear neighbours.
+    assert line_deviation(points, 0, 2) <= 0.5
     assert split_and_merge(points, threshold=0.5).tolist() == [0, 2, 5]
 
 

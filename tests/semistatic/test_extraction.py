@@ -47,7 +47,7 @@ def test_remove_invalid_applies_the_mapper_max_range():
 
 
 def _outliers_reference(ranges, valid, k, alpha):
-    """DESIGN.md detail 1 with plain loops: windows over valid ranges only."""
+    """docs/design.md#detail-1 with plain loops: windows over valid ranges only."""
     index = [i for i in range(len(ranges)) if valid[i]]
     kept = list(valid)
     for position, i in enumerate(index):

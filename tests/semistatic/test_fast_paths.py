@@ -1,10 +1,11 @@
 """The mapper's shortcuts and compiled kernels give what their slow references give.
 
 The compiled Douglas-Peucker (extraction and merge alike) is checked against GEOS on
-seeded random inputs, and the whole mapper against itself with the association's
-shortcut past the similarities (when the gate alone fixes the optimal path) switched off.
-(``hausdorff``, ``similarity``, ``association`` and ``visibility`` have one compiled
-implementation each, tested against their references in their own test modules.)
+seeded random inputs, and the association - which skips the similarities when the gate
+alone fixes the optimal path - against eq. (4-5) computed in full, pair by pair, both on
+its own and inside the whole mapper. (``hausdorff``, ``similarity``, ``association`` and
+``visibility`` have one compiled implementation each, tested against their references in
+their own test modules.)
 """
 
 from __future__ import annotations
@@ -18,21 +19,29 @@ import numpy as np
 import pytest
 import shapely
 
-from semistatic.association import FAR_COST, _optimal_path
-from semistatic.extraction import douglas_peucker
-from semistatic.local_map import LocalMap
-from semistatic.mapper import MapPolyline, PolylineMap, _replaced
-from semistatic.polyline import EMPTY_BOX, Polyline, pack_vertices
+from semistatic.association import (
+    FAR_COST,
+    ValidatedPairs,
+    associate,
+    box_gap,
+    optimal_path,
+    orient_ccw,
+    sort_ccw,
+)
+from semistatic.extraction import douglas_peucker, split_breakpoints
+from semistatic.hausdorff import restricted_hausdorff
+from semistatic.mapper import PolylineMap
+from semistatic.merge import DUPLICATE_DISTANCE, distinct_vertices
+from semistatic.polyline import EMPTY_BOX, PackedPolylines, Polyline, as_polyline
 from semistatic.similarity import similarity
 from semistatic.types import Scan
-from semistatic.visibility import extend_ends
+from semistatic.visibility import MAX_END_EXTENSION, extend_ends
 from tests.semistatic.conftest import NASTY_POLYLINES
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
 # The package re-exports functions named like these modules: import the modules by name.
-merge_module = importlib.import_module("semistatic.merge")
-extraction_module = importlib.import_module("semistatic.extraction")
 association_module = importlib.import_module("semistatic.association")
+mapper_module = importlib.import_module("semistatic.mapper")
 
 # Both paths run the same arithmetic in a different order (numpy's complex abs, its dot
 # product's summation): results agree to rounding.
@@ -63,10 +72,8 @@ def test_compiled_douglas_peucker_keeps_what_geos_keeps(seed):
 def test_distinct_drops_exactly_the_consecutive_repeats(name):
     points = NASTY_POLYLINES[name]
     expected = [row for k, row in enumerate(points.tolist())
-                if k == 0 or math.dist(row, points[k - 1]) > merge_module.DUPLICATE_DISTANCE]
-    np.testing.assert_array_equal(
-        merge_module._distinct(points), np.array(expected).reshape(-1, 2)
-    )
+                if k == 0 or math.dist(row, points[k - 1]) > DUPLICATE_DISTANCE]
+    np.testing.assert_array_equal(distinct_vertices(points), np.array(expected).reshape(-1, 2))
 
 
 def _reference_optimal_path(costs):
@@ -104,14 +111,51 @@ def test_optimal_path_equals_the_cell_by_cell_recursion(seed):
     shape = tuple(int(k) for k in rng.integers(1, 9, 2))
     costs = rng.integers(0, 3, shape).astype(float)  # many exact ties
     costs[rng.uniform(size=shape) < 0.4] = FAR_COST
-    assert _optimal_path(costs) == _reference_optimal_path(costs)
+    assert optimal_path(costs) == _reference_optimal_path(costs)
 
 
-def test_replaced_entry_equals_dataclasses_replace():
-    entry = MapPolyline(4, Polyline([[0.0, 0.0], [1.0, 0.0]]), "new", 2, 1, 0.5, 0.7)
-    changes = {"status": "confirmed", "hits": 3, "misses": 0, "last_seen": 1.5}
-    assert _replaced(entry, **changes) == dataclasses.replace(entry, **changes)
-    assert entry.status == "new"  # the original is untouched
+def reference_associate(scans, maps, gate, *, viewpoint=None, mode="vertex"):
+    """Eq. (4-5) in full: every feasible pair's similarity, the cell-by-cell recursion.
+
+    The candidates and costs are the association's own definition (module notes of
+    ``semistatic.association``): polylines with a partner whose box is within the gate,
+    ``FAR_COST`` for a pair farther apart or without shape; no shortcut past the
+    similarities.
+    """
+    scans, maps = [as_polyline(line) for line in scans], [as_polyline(line) for line in maps]
+    order = list(range(len(maps))) if viewpoint is None else sort_ccw(maps, viewpoint).tolist()
+    oriented = [maps[j] if viewpoint is None else orient_ccw(maps[j], viewpoint) for j in order]
+    scan_boxes, map_boxes = PackedPolylines(scans).boxes, PackedPolylines(oriented).boxes
+    near = np.array([[box_gap(scan_boxes, a, map_boxes, b) <= gate for b in range(len(maps))]
+                     for a in range(len(scans))], dtype=bool).reshape(len(scans), len(maps))
+    rows, columns = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
+    if not (rows.size and columns.size):
+        return ValidatedPairs()
+    costs = np.full((rows.size, columns.size), FAR_COST)
+    for a, i in enumerate(rows):
+        for b, k in enumerate(columns):
+            if near[i, k]:
+                costs[a, b] = min(similarity(scans[i], oriented[k]), FAR_COST)
+    pairs, distances = [], []
+    for a, b in _reference_optimal_path(costs):
+        i, k = rows[a], columns[b]
+        if near[i, k] and len(scans[i]) and len(oriented[k]):
+            distance = restricted_hausdorff(scans[i], oriented[k], mode)
+            if distance <= gate:
+                pairs.append((int(i), order[k]))
+                distances.append(distance)
+    return ValidatedPairs(pairs, distances)
+
+
+def test_map_entries_after_updates_are_valid_map_polylines():
+    # The update replaces the entries it touches without re-validating them (its changes
+    # are valid by construction): the validated constructor must accept them as they are.
+    mapper = _hall_mapped(seed=3, updates=6, jitter=[0.1, 0.1, 0.05])
+    assert len(mapper) >= 3
+    for entry in mapper:
+        assert dataclasses.replace(entry) == entry
+        if entry.support is not None:
+            np.testing.assert_array_equal(dataclasses.replace(entry).support, entry.support)
 
 
 def _hall():
@@ -121,13 +165,24 @@ def _hall():
     return scene(*parts)
 
 
+def _hall_mapped(seed, updates, jitter):
+    """A map of :func:`_hall` from ``updates`` noisy scans, poses within ``jitter`` of 0."""
+    rng = np.random.default_rng(seed)
+    world = _hall()
+    mapper = PolylineMap()
+    for k in range(updates):
+        pose = rng.uniform(np.negative(jitter), jitter)
+        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    return mapper
+
+
 def _run(scans, poses):
     mapper = PolylineMap()
     reports = [mapper.update(scan, pose) for scan, pose in zip(scans, poses, strict=True)]
     return mapper, reports
 
 
-def test_mapper_without_the_forced_association_path_gives_the_same_map(monkeypatch):
+def test_mapper_with_the_association_in_full_gives_the_same_map(monkeypatch):
     rng = np.random.default_rng(11)
     poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(12)]
     world = _hall()
@@ -136,7 +191,7 @@ def test_mapper_without_the_forced_association_path_gives_the_same_map(monkeypat
     ]
     fast_map, fast_reports = _run(scans, poses)
     assert sum(len(report.associated) for report in fast_reports) >= 3 * len(scans[1:])
-    monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
+    monkeypatch.setattr(mapper_module, "associate", reference_associate)
     slow_map, slow_reports = _run(scans, poses)
     for fast, slow in zip(fast_reports, slow_reports, strict=True):
         assert [(a.scan_index, a.map_id) for a in fast.associated] == [
@@ -191,7 +246,7 @@ def test_extend_ends_equals_the_list_reference(seed):
     if seed % 7 == 0:
         points[1] = points[0]  # a zero-length end edge is left alone
     increment = math.radians(float(rng.choice([0.25, 0.5, 1.0])))
-    moved = extend_ends(points, increment, viewpoint=viewpoint)
+    (moved,) = extend_ends([points], increment, viewpoint=viewpoint)
     np.testing.assert_array_equal(
         moved.points, _reference_extend_ends(points.tolist(), increment, viewpoint)
     )
@@ -209,9 +264,17 @@ def _scene_polylines(rng, count):
     return lines
 
 
-def test_forced_association_path_equals_the_full_recursion(monkeypatch):
+def _spied_similarity(monkeypatch):
+    """Count the association's calls of ``similarity`` (it computes none on a forced path)."""
+    calls = []
+    monkeypatch.setattr(association_module, "similarity",
+                        lambda *args, calls=calls: calls.append(args) or similarity(*args))
+    return calls
+
+
+def test_association_equals_the_full_recursion(monkeypatch):
+    calls = _spied_similarity(monkeypatch)
     forced = []
-    costs = association_module._similarity_costs
     for seed in range(80):
         rng = np.random.default_rng(seed)
         maps = _scene_polylines(rng, int(rng.integers(1, 8)))
@@ -221,63 +284,45 @@ def test_forced_association_path_equals_the_full_recursion(monkeypatch):
         scans += _scene_polylines(rng, int(rng.integers(0, 3)))
         gate = float(rng.choice([0.12, 0.5, 1.5]))
         viewpoint = (0.0, 0.0, float(rng.uniform(-math.pi, math.pi)))
-        calls = []
-        monkeypatch.setattr(association_module, "_similarity_costs",
-                            lambda *args, calls=calls: calls.append(1) or costs(*args))
-        monkeypatch.setattr(association_module, "_FORCED_PATHS", True)
-        fast = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
+        calls.clear()
+        fast = associate(scans, maps, gate, viewpoint=viewpoint)
         forced.append(not calls)
-        monkeypatch.setattr(association_module, "_FORCED_PATHS", False)
-        slow = association_module.associate_with_distances(scans, maps, gate, viewpoint=viewpoint)
+        slow = reference_associate(scans, maps, gate, viewpoint=viewpoint)
         assert fast == slow, seed
-    # Both branches were exercised: paths fixed by the gate alone, and paths that needed
-    # the similarities.
+        np.testing.assert_allclose(fast.distances, slow.distances, rtol=0.0, atol=1e-12)
+    # Both kinds of input were met: paths the gate alone fixes, and paths that needed the
+    # similarities.
     assert 10 <= sum(forced) <= len(forced) - 10
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_similarity_costs_equal_the_similarity_of_each_pair(seed):
+def test_similarity_of_two_sets_equals_the_similarity_of_each_pair(seed):
     rng = np.random.default_rng(seed)
-    scans = _scene_polylines(rng, int(rng.integers(1, 5)))
-    maps = _scene_polylines(rng, int(rng.integers(1, 5)))
-    feasible = rng.random((len(scans), len(maps))) < 0.7
-    scan_points, scan_bounds = pack_vertices(scans)
-    map_points, map_bounds = pack_vertices(maps)
-    costs = association_module._similarity_costs(
-        feasible, scan_points, scan_bounds, map_points, map_bounds
-    )
-    for a, scan in enumerate(scans):
-        for b, line in enumerate(maps):
-            value = similarity(scan, line)
-            expected = value if feasible[a, b] and value < FAR_COST else FAR_COST
-            assert costs[a, b] == expected, (a, b)
+    count = int(rng.integers(1, 6))
+    scans, maps = _scene_polylines(rng, count), _scene_polylines(rng, count)
+    values = similarity(PackedPolylines(scans), PackedPolylines(maps))
+    assert values.tolist() == [similarity(a, b) for a, b in zip(scans, maps, strict=True)]
 
 
-def test_forced_path_needs_one_best_path():
-    two_ways = np.ones((2, 2), dtype=bool)
-    line = Polyline([[0.0, 0.0], [1.0, 0.0]])
-    # All four pairs can pass: the diagonal and the two L-shaped paths differ only by the
-    # similarities, so they must be computed.
-    points = np.concatenate((line.points, line.points))
-    bounds = np.array([0, 2, 4])
-    forced = association_module._forced_kernel
-    assert not forced(two_ways, points, bounds, points, bounds)[1]
-    diagonal = np.eye(2, dtype=bool)
-    path, fixed = forced(diagonal, points, bounds, points, bounds)
-    assert fixed
-    assert path.tolist() == [[0, 0], [1, 1]]
+def test_the_similarities_decide_only_where_the_gate_leaves_two_paths(monkeypatch):
+    calls = _spied_similarity(monkeypatch)
+    line = [[0.0, 0.0], [1.0, 0.0]]
+    corner = [[0.0, 0.05], [0.5, 0.05], [0.5, 0.1]]
+    # All four pairs can pass: the diagonal and the two L-shaped paths differ only by
+    # the similarities, so they are computed.
+    scans, maps = [line, corner], [np.add(line, [0.0, 0.03]), np.add(corner, [0.0, 0.02])]
+    assert associate(scans, maps, 0.5) == reference_associate(scans, maps, 0.5)
+    assert calls
+    calls.clear()
+    # Each polyline near only its counterpart: the diagonal, and no similarity.
+    apart = [line, np.add(corner, [5.0, 0.0])]
+    assert associate(apart, [maps[0], np.add(maps[1], [5.0, 0.0])], 0.5) == [(0, 0), (1, 1)]
+    assert calls == []
 
 
 def test_a_typical_update_computes_no_similarity(monkeypatch):
-    calls = []
-    monkeypatch.setattr(association_module, "_similarity_costs",
-                        lambda *args: calls.append(args) or np.zeros(args[0].shape))
-    rng = np.random.default_rng(4)
-    world = _hall()
-    mapper = PolylineMap()
-    for k in range(4):
-        pose = rng.uniform([-0.05, -0.05, -0.02], [0.05, 0.05, 0.02])
-        mapper.update(cast_scan(world, pose, noise=0.01, rng=rng, stamp=0.1 * k), pose)
+    calls = _spied_similarity(monkeypatch)
+    mapper = _hall_mapped(seed=4, updates=4, jitter=[0.05, 0.05, 0.02])
     assert len(mapper) >= 3
     assert calls == []
 
@@ -294,11 +339,12 @@ def test_polyline_boxes_equal_numpy_bounds(seed):
     points = rng.normal(0.0, 3.0, (int(rng.integers(2, 30)), 2))
     cuts = sorted(set(rng.integers(1, points.shape[0], 3).tolist()))
     bounds = [0, *cuts, points.shape[0]]
-    lines = Polyline._split(points.copy(), np.arange(points.shape[0]), bounds)
-    for line, (start, stop) in zip(lines, itertools.pairwise(bounds), strict=True):
+    lines = PackedPolylines.from_runs(points.copy(), bounds, np.arange(points.shape[0]))
+    for k, (start, stop) in enumerate(itertools.pairwise(bounds)):
         part = points[start:stop]
         expected = (*part.min(axis=0).tolist(), *part.max(axis=0).tolist())
-        assert line.box == expected
+        assert lines[k].box == expected
+        assert tuple(lines.boxes[k].tolist()) == expected
         assert Polyline(part).box == expected
     assert Polyline(np.empty((0, 2))).box == EMPTY_BOX
 
@@ -306,8 +352,10 @@ def test_polyline_boxes_equal_numpy_bounds(seed):
 @pytest.mark.parametrize("seed", range(30))
 def test_near_boxes_equal_shapely_box_distances(seed):
     rng = np.random.default_rng(seed)
-    lines = [Polyline(rng.normal(0.0, 1.0, (2, 2)) * 0.3 + rng.normal(0.0, 1.0, 2))
-             for _ in range(6)] + [Polyline(np.empty((0, 2)))]
+    lines = PackedPolylines(
+        [rng.normal(0.0, 1.0, (2, 2)) * 0.3 + rng.normal(0.0, 1.0, 2) for _ in range(6)]
+        + [np.empty((0, 2))]
+    )
     boxes = [line.box for line in lines]
     gate = float(rng.uniform(0.05, 0.5))
     shapes = [shapely.box(*box) if box != EMPTY_BOX else None for box in boxes]
@@ -315,31 +363,40 @@ def test_near_boxes_equal_shapely_box_distances(seed):
         [a is not None and b is not None and shapely.distance(a, b) <= gate for b in shapes]
         for a in shapes
     ]
-    assert (association_module.box_gaps(boxes, boxes) <= gate).tolist() == expected
+    count = len(lines)
+    assert [[box_gap(lines.boxes, a, lines.boxes, b) <= gate for b in range(count)]
+            for a in range(count)] == expected
 
 
-def test_keep_box_prefilter_changes_nothing(monkeypatch):
+def test_keep_box_prefilter_changes_nothing():
     rng = np.random.default_rng(5)
     world = _hall()
-    area = [(2.0, -0.8), (3.2, -0.8), (3.2, 0.8), (2.0, 0.8)]  # around the wall x = 3
+    area = shapely.box(2.0, -0.8, 3.2, 0.8)  # around the wall x = 3
     poses = [rng.uniform([-0.1, -0.1, -0.05], [0.1, 0.1, 0.05]) for _ in range(8)]
     scans = [cast_scan(world, pose, noise=0.01, rng=rng) for pose in poses]
 
-    def run():
-        local = LocalMap(safety_areas=[area])
-        reports = [local.update(scan, pose) for scan, pose in zip(scans, poses, strict=True)]
-        return local, reports
+    def keep(line):
+        geometry = shapely.Point(line.points[0]) if len(line) == 1 else shapely.LineString(
+            line.points)
+        return bool(area.intersects(geometry))
 
-    filtered, filtered_reports = run()
-    # Something is kept, and something is dropped by the box alone.
+    def run(keep_box):
+        mapper = PolylineMap(keep=keep, keep_box=keep_box)
+        reports = [mapper.update(scan, pose) for scan, pose in zip(scans, poses, strict=True)]
+        return mapper, reports
+
+    filtered, filtered_reports = run(area.bounds)
+    # Something is kept, and something is dropped by the box alone: an unassociated scan
+    # polyline farther from the box than an end extension can reach.
+    reach = MAX_END_EXTENSION
+    xmin, ymin, xmax, ymax = np.add(area.bounds, [-reach, -reach, reach, reach]).tolist()
     assert len(filtered) > 0
-    box_drops = [
-        set(r.unassociated) - set(filtered._map._maybe_kept(r.scan_polylines, r.unassociated))
-        for r in filtered_reports
-    ]
-    assert any(box_drops)
-    monkeypatch.setattr(PolylineMap, "_maybe_kept", lambda self, lines, indices: list(indices))
-    unfiltered, unfiltered_reports = run()
+    assert any(
+        (box := report.scan_polylines[index].box)[0] > xmax or box[2] < xmin
+        or box[1] > ymax or box[3] < ymin
+        for report in filtered_reports for index in report.unassociated
+    )
+    unfiltered, unfiltered_reports = run(None)
     assert [r.new_ids for r in filtered_reports] == [r.new_ids for r in unfiltered_reports]
     assert list(filtered.entries) == list(unfiltered.entries)
     for map_id, entry in filtered.entries.items():
@@ -368,16 +425,22 @@ def test_breakpoint_table_equals_the_adaptive_formula(seed):
     ranges = rng.uniform(0.5, 6.0, 361)
     ranges[rng.integers(0, 361, 40)] = np.inf  # gaps of one and more beams
     scan = Scan(ranges=ranges, angle_min=-math.pi / 2, angle_increment=math.radians(0.5))
-    index = np.flatnonzero(np.isfinite(ranges))
-    x, y = extraction_module._end_points(scan, index)
+    usable = np.isfinite(ranges)
+    index = np.flatnonzero(usable)
+    x, y = scan.points()[index].T
     lam, sigma_r = math.radians(float(rng.uniform(3.0, 15.0))), 0.01
     step = np.diff(index)
     dphi = step * scan.angle_increment
     with np.errstate(divide="ignore", invalid="ignore"):
         threshold = ranges[index[:-1]] * np.sin(dphi) / np.sin(lam - dphi) + 3.0 * sigma_r
     jump = np.hypot(np.diff(x), np.diff(y))
-    expected = (step <= extraction_module.MAX_BRIDGED_GAP + 1) & (dphi < lam) & (jump <= threshold)
-    joined = extraction_module._joined(scan, index, x, y, lam, sigma_r)
+    expected = (step <= 2) & (dphi < lam) & (jump <= threshold)  # MAX_BRIDGED_GAP = 1
+    # Consecutive usable beams stay together exactly when they share an interval.
+    intervals = split_breakpoints(scan, usable, lam, sigma_r, min_points=1)
+    interval_of = np.empty(ranges.size, np.int64)
+    for number, beams in enumerate(intervals):
+        interval_of[beams] = number
+    joined = np.diff(interval_of[index]) == 0
     np.testing.assert_array_equal(joined, expected)
     assert joined.any()
     assert not joined.all()

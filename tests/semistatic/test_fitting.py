@@ -5,9 +5,16 @@ import pytest
 import shapely
 
 from semistatic.extraction import douglas_peucker, extract_polylines
-from semistatic.fitting import fit_polyline, is_mixed_pixel, total_least_squares
+from semistatic.fitting import fit_polylines, is_mixed_pixel, total_least_squares
 from semistatic.params import MapperParams
 from tests.semistatic.synthetic import box, box_corners, cast_scan, scene, wall
+
+
+def fit_polyline(points, corners, epsilon):
+    """The fit of one polyline: ``fit_polylines`` of one interval, vertices and positions."""
+    points = np.asarray(points, dtype=float)
+    vertices, kept, _ = fit_polylines(points, np.zeros(len(points), np.int64), corners, epsilon)
+    return vertices, kept
 
 
 def svd_line(points):
@@ -141,12 +148,38 @@ def test_adjacent_edges_one_line_fits_are_merged():
     assert np.all(np.hypot(*(vertices - points[kept]).T) < 0.02)
 
 
-def test_fit_polyline_rejects_bad_corners():
+def test_fit_polylines_rejects_bad_corners_and_intervals():
     points = [[1.0, 0.0], [1.0, 0.1], [1.0, 0.2]]
     with pytest.raises(ValueError, match="corners must increase"):
         fit_polyline(points, [0, 1], 0.03)
     with pytest.raises(ValueError, match="epsilon"):
         fit_polyline(points, [0, 2], 0.0)
+    with pytest.raises(ValueError, match="corners must increase"):  # no corner ends line 0
+        fit_polylines([*points, [1.0, 0.3]], [0, 0, 1, 1], [0, 3], 0.03)
+    with pytest.raises(ValueError, match="line_ids"):  # an interval of one reading
+        fit_polylines(points, [0, 0, 1], [0, 1, 2], 0.03)
+
+
+def test_many_intervals_are_fitted_as_each_alone():
+    rng = np.random.default_rng(2)
+    intervals = []
+    for k in range(4):
+        count = int(rng.integers(3, 12))
+        angles = np.linspace(-0.3, 0.3, count) + k
+        ranges = rng.uniform(1.0, 3.0) + 0.01 * rng.normal(size=count)
+        intervals.append(np.column_stack((ranges * np.cos(angles), ranges * np.sin(angles))))
+    corners = [douglas_peucker(points, 0.005) for points in intervals]
+    starts = np.cumsum([0] + [len(points) for points in intervals[:-1]])
+    together = fit_polylines(
+        np.concatenate(intervals), np.repeat(np.arange(4), [len(p) for p in intervals]),
+        np.concatenate([kept + start for kept, start in zip(corners, starts, strict=True)]),
+        0.01,
+    )
+    for number, (points, kept, start) in enumerate(zip(intervals, corners, starts, strict=True)):
+        vertices, alone = fit_polyline(points, kept, 0.01)
+        mine = together[2] == number
+        np.testing.assert_array_equal(together[0][mine], vertices)
+        np.testing.assert_array_equal(together[1][mine], alone + start)
 
 
 def test_fitted_box_outline_is_closer_to_the_truth_than_raw_vertices():

@@ -8,15 +8,9 @@ import shapely
 
 from semistatic.mapper import PolylineMap
 from semistatic.params import MapperParams
-from semistatic.polyline import Polyline, pack_vertices
+from semistatic.polyline import Polyline
 from semistatic.types import Scan
-from semistatic.visibility import (
-    free_space_cut,
-    free_space_cuts,
-    is_missing,
-    missed_and_cut,
-    visible_beams,
-)
+from semistatic.visibility import MIN_VISIBLE_FRACTION, MISSING_FRACTION, visibility
 from tests.semistatic.synthetic import box, cast_scan, scene, wall
 
 PARAMS = MapperParams()
@@ -33,9 +27,14 @@ def wall_scan(through: slice, step: float = 0.02) -> Scan:
     return Scan(ranges=ranges, angle_min=-0.5, angle_increment=step)
 
 
+def free_space_cut(polyline, scan, pose=ORIGIN, params=PARAMS):
+    """What the free-space cut leaves of one polyline (``None``: it cuts nothing)."""
+    return visibility([polyline], scan, pose, params).pieces[0]
+
+
 def test_a_run_of_beams_reading_through_cuts_out_that_part():
     scan = wall_scan(slice(30, 36))
-    pieces = free_space_cut(WALL, scan, ORIGIN, PARAMS)
+    pieces = free_space_cut(WALL, scan)
     # Hand-computed reference: the beams cross the wall at y = 2 tan(angle); the cut runs
     # from half way between beams 29 and 30 to half way between beams 35 and 36.
     crossing = 2.0 * np.tan(-0.5 + 0.02 * np.arange(51))
@@ -48,23 +47,20 @@ def test_a_run_of_beams_reading_through_cuts_out_that_part():
     assert shapely.hausdorff_distance(result, expected) < 1e-9
 
 
-def test_nothing_read_through_returns_the_polyline_itself():
-    scan = wall_scan(slice(0, 0))
-    assert free_space_cut(WALL, scan, ORIGIN, PARAMS) == [WALL]
-    assert free_space_cut(WALL, scan, ORIGIN, PARAMS)[0] is WALL
+def test_nothing_read_through_cuts_nothing():
+    assert free_space_cut(WALL, wall_scan(slice(0, 0))) is None
 
 
 def test_one_beam_or_a_span_narrower_than_the_gate_cuts_nothing():
     # One beam through: noise, or a reading slipping past.
-    assert free_space_cut(WALL, wall_scan(slice(30, 31)), ORIGIN, PARAMS)[0] is WALL
+    assert free_space_cut(WALL, wall_scan(slice(30, 31))) is None
     # Two beams 0.005 rad apart span about 2 cm of the wall: below the 12 cm gate (a person
     # walking past, merged rather than cut).
-    scan = wall_scan(slice(100, 102), step=0.005)
-    assert free_space_cut(WALL, scan, ORIGIN, PARAMS)[0] is WALL
+    assert free_space_cut(WALL, wall_scan(slice(100, 102), step=0.005)) is None
 
 
 def test_read_through_everywhere_leaves_nothing():
-    assert free_space_cut(WALL, wall_scan(slice(None)), ORIGIN, PARAMS) == []
+    assert free_space_cut(WALL, wall_scan(slice(None))) == []
 
 
 def test_grazing_beams_past_an_end_cut_nothing():
@@ -75,7 +71,7 @@ def test_grazing_beams_past_an_end_cut_nothing():
     angles = np.radians(np.arange(-5.0, 5.01, 0.5))
     scan = Scan(ranges=np.full(angles.size, 6.0), angle_min=angles[0],
                 angle_increment=math.radians(0.5))
-    assert free_space_cut(face, scan, ORIGIN, PARAMS)[0] is face
+    assert free_space_cut(face, scan) is None
 
 
 def pushed_box_map(params: MapperParams) -> list[shapely.LineString]:
@@ -146,42 +142,44 @@ def test_beam_counts_of_many_polylines_match_geos(seed):
     scan = cast_scan(world, pose, noise=0.01, rng=rng)
     lines = [Polyline(rng.uniform(-4.0, 4.0, (int(rng.integers(2, 6)), 2))) for _ in range(4)]
     params = MapperParams()
-    checked = missed_and_cut(lines, scan, pose, params)
-    for line, (missing, _) in zip(lines, checked, strict=True):
+    seen = visibility(lines, scan, pose, params)
+    for k, line in enumerate(lines):
         expected = geos_expected_ranges(line.points, scan, pose)
         in_view = (expected >= scan.range_min) & (expected <= min(scan.range_max,
                                                                   params.max_range))
         margin = params.visibility_margin
         unoccluded = in_view & (scan.ranges >= expected - margin)
         seen_through = unoccluded & (scan.ranges > expected + margin)
-        counts = visible_beams(line, scan, pose, max_range=params.max_range, margin=margin)
-        assert tuple(counts) == (in_view.sum(), unoccluded.sum(), seen_through.sum())
-        assert missing == is_missing(line, scan, pose, params)
+        counts = (seen.in_view[k], seen.unoccluded[k], seen.seen_through[k])
+        assert counts == (in_view.sum(), unoccluded.sum(), seen_through.sum())
+        # docs/design.md#detail-10: should have been visible, and read through.
+        visible = unoccluded.sum() >= max(params.min_points,
+                                          math.ceil(MIN_VISIBLE_FRACTION * in_view.sum()))
+        read_through = seen_through.sum() >= MISSING_FRACTION * unoccluded.sum()
+        assert seen.missing[k] == (unoccluded.any() and visible and read_through)
 
 
 def test_many_polylines_are_cut_as_each_alone():
     # In one pass, the wall between others gets the hand-computed cut of the first test
-    # and the others, uncut, come back as themselves.
+    # and the others are cut nowhere.
     far, point = Polyline([[9.0, -1.0], [9.0, 1.0]]), Polyline([[2.0, 0.3]])
     scan = wall_scan(slice(30, 36))
-    checked = missed_and_cut([far, point, WALL, far], scan, ORIGIN, PARAMS)
-    for k in (0, 1, 3):
-        assert checked[k][1][0] is (far, point, None, far)[k]
+    seen = visibility([far, point, WALL, far], scan, ORIGIN, PARAMS)
+    assert [seen.pieces[k] for k in (0, 1, 3)] == [None, None, None]
     crossing = 2.0 * np.tan(-0.5 + 0.02 * np.arange(51))
     low, high = 0.5 * (crossing[29] + crossing[30]), 0.5 * (crossing[35] + crossing[36])
-    pieces = np.array([piece.points for piece in checked[2][1]])
+    pieces = np.array([piece.points for piece in seen.pieces[2]])
     np.testing.assert_allclose(pieces, [[[2.0, -1.0], [2.0, low]], [[2.0, high], [2.0, 1.0]]],
                                atol=1e-12)
-    # free_space_cuts: the same pieces, None for the polylines cut nowhere.
-    cuts = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS)
-    assert [cuts[k] for k in (0, 1, 3)] == [None, None, None]
-    np.testing.assert_array_equal(np.array([piece.points for piece in cuts[2]]), pieces)
-    # The same from vertices packed already (a map's, with a polyline not checked).
-    points, offsets = pack_vertices([line.points for line in (WALL, far, point)])
-    packed = free_space_cuts([far, point, WALL, far], scan, ORIGIN, PARAMS,
-                             packed=(points, offsets, [1, 2, 0, 1]))
-    assert [packed[k] for k in (0, 1, 3)] == [None, None, None]
-    np.testing.assert_array_equal(np.array([piece.points for piece in packed[2]]), pieces)
+    # Each alone: the same pieces and counts.
+    np.testing.assert_array_equal(
+        np.array([piece.points for piece in free_space_cut(WALL, scan)]), pieces
+    )
+    for k, line in enumerate((far, point, WALL, far)):
+        alone = visibility([line], scan, ORIGIN, PARAMS)
+        assert (alone.in_view[0], alone.unoccluded[0], alone.seen_through[0],
+                alone.missing[0]) == (seen.in_view[k], seen.unoccluded[k],
+                                      seen.seen_through[k], seen.missing[k])
 
 
 def test_beams_past_a_corner_level_with_its_face_cut_nothing():
@@ -208,4 +206,4 @@ def test_beams_past_a_corner_level_with_its_face_cut_nothing():
                         for point in getattr(crossing, "geoms", [crossing]))
             through += reading > first + PARAMS.visibility_margin
     assert through >= 2
-    assert free_space_cut(mapped, scan, pose, PARAMS)[0] is mapped
+    assert free_space_cut(mapped, scan, pose) is None

@@ -12,7 +12,7 @@ from semistatic.hausdorff import (
     restrict,
     restricted_hausdorff,
 )
-from semistatic.polyline import Polyline
+from semistatic.polyline import PackedPolylines, Polyline
 
 REFERENCE_SPACING = 0.01  # densify the shapely reference to 1 cm
 
@@ -288,7 +288,25 @@ def test_reversed_and_read_only_inputs_give_the_same_distance():
     points0 = np.array([[0.0, 0.0], [1.0, 0.3], [2.0, 0.0], [3.0, 0.5]])
     points1 = points0[1:3] + 0.04
     line = Polyline(points0)  # read-only storage
-    reversed_view = Polyline._trusted(line.points[::-1], line.scan_indices[::-1])
+    reversed_view = line.reversed()  # views of read-only arrays, negative strides
     expected = restricted_hausdorff(points0[::-1].copy(), points1)
     assert restricted_hausdorff(reversed_view, points1) == expected
     assert restricted_hausdorff(line, points1) == restricted_hausdorff(points0.copy(), points1)
+
+
+@pytest.mark.parametrize("mode", ["vertex", "projection"])
+def test_two_sets_are_measured_pair_by_pair(mode):
+    rng = np.random.default_rng(9)
+    first = [np.cumsum(rng.normal(0.0, 0.5, (int(rng.integers(0, 6)), 2)), axis=0)
+             for _ in range(12)]
+    second = [line + rng.normal(0.0, 0.1, 2) if len(line) and k % 3 else
+              rng.normal(0.0, 1.0, (int(rng.integers(1, 4)), 2)) for k, line in enumerate(first)]
+    sets = PackedPolylines(first), PackedPolylines(second)
+    for limit in (math.inf, 0.2):
+        together = restricted_hausdorff(*sets, mode, limit=limit)
+        assert together.tolist() == [restricted_hausdorff(a, b, mode, limit=limit)
+                                     for a, b in zip(first, second, strict=True)]
+    assert hausdorff(*sets).tolist() == [hausdorff(a, b) for a, b in zip(first, second,
+                                                                         strict=True)]
+    with pytest.raises(ValueError, match="as long"):
+        restricted_hausdorff(sets[0], PackedPolylines(second[:3]))

@@ -1,16 +1,17 @@
-"""Join (paper Sec. 3.4, DESIGN.md detail 8)."""
+"""Join (paper Sec. 3.4, docs/design.md#detail-8)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.sparse.csgraph import connected_components
 
-from semistatic.association import bounding_boxes
-from semistatic.join import join, overlapping_groups, overlaps
-from semistatic.polyline import Polyline
+from semistatic.hausdorff import restricted_hausdorff
+from semistatic.join import MIN_OVERLAP, merge_group, overlapping_groups
+from semistatic.polyline import PackedPolylines, Polyline
 from tests.semistatic.conftest import NASTY_POLYLINES
 
 EPSILON = 0.03
@@ -24,16 +25,55 @@ polylines = st.lists(st.tuples(coordinates, coordinates), min_size=0, max_size=6
 )
 
 
+def join(lines, gate, epsilon, mode="vertex", *, weights=None, candidates=None):
+    """Join as the mapper does: the groups, each merged; the others as they are."""
+    lines = PackedPolylines(lines)
+    changed = np.ones(len(lines), dtype=bool)
+    if candidates is not None:
+        changed = np.isin(np.arange(len(lines)), candidates)
+    weights = [1.0] * len(lines) if weights is None else weights
+    groups = overlapping_groups(lines, changed, gate, mode)
+    joined = {members[0]: (merge_group(lines, weights, members, epsilon), tuple(members))
+              for members in groups}
+    grouped = {k for members in groups for k in members}
+    return [joined.get(k, (line, (k,))) for k, line in enumerate(lines)
+            if k in joined or k not in grouped]
+
+
+def overlaps(p0, p1, gate, mode="vertex"):
+    """Whether two polylines overlap: the groups of the pair alone."""
+    return overlapping_groups([p0, p1], [True, True], gate, mode) == [[0, 1]]
+
+
+def reference_overlaps(p0, p1, gate, mode):
+    """docs/design.md#detail-8 for one pair, extents by GEOS linear referencing."""
+    def distinct(points):
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        keep = np.concatenate(([True], np.hypot(*np.diff(points, axis=0).T) > 1e-9))
+        return points[keep[: len(points)]]
+
+    a, b = distinct(p0), distinct(p1)
+    if not (len(a) and len(b)) or restricted_hausdorff(a, b, mode) > gate:
+        return False
+    if len(a) == 1 and len(b) == 1:
+        return bool(np.hypot(*(a[0] - b[0])) <= gate)
+    if len(a) == 1 or len(b) == 1:
+        point, line = (a, b) if len(a) == 1 else (b, a)
+        along = shapely.LineString(line).project(shapely.Point(point[0]))
+        return MIN_OVERLAP < along < shapely.LineString(line).length - MIN_OVERLAP
+
+    def span(points, onto):
+        along = shapely.line_locate_point(shapely.LineString(onto), shapely.points(points))
+        return along.max() - along.min()
+
+    return max(span(b, a), span(a, b)) > MIN_OVERLAP
+
+
 @pytest.mark.parametrize("name", sorted(NASTY_POLYLINES))
 def test_nasty_polylines_go_through_join(name):
     nasty = NASTY_POLYLINES[name]
     groups = join([nasty, BOX, nasty + 10.0], GATE, EPSILON)
     assert sorted(k for _, members in groups for k in members) == [0, 1, 2]
-
-
-def test_invalid_weights_are_rejected():
-    with pytest.raises(ValueError, match="weights"):
-        join([WALL, WALL], GATE, EPSILON, weights=[1.0])
 
 
 def test_overlaps():
@@ -92,7 +132,7 @@ def test_join_partitions_its_input(lines):
 
 
 def test_overlapping_groups_are_the_components_of_all_overlapping_pairs():
-    # Reference: every pair tested with overlaps, components by scipy's graph search.
+    # Reference: every pair tested by the definition, components by scipy's graph search.
     rng = np.random.default_rng(5)
     for _ in range(20):
         lines = []
@@ -101,19 +141,20 @@ def test_overlapping_groups_are_the_components_of_all_overlapping_pairs():
             lines.append(Polyline(start + np.cumsum(rng.uniform(-0.4, 0.4, (3, 2)), axis=0)))
         lines.append(Polyline(lines[0].points + 0.01))  # one sure overlap
         count = len(lines)
-        linked = np.array([[a != b and overlaps(lines[a], lines[b], GATE, "projection")
-                            for b in range(count)] for a in range(count)])
+        linked = np.array([
+            [a != b and reference_overlaps(lines[a].points, lines[b].points, GATE, "projection")
+             for b in range(count)] for a in range(count)
+        ])
         _, labels = connected_components(linked, directed=False)
         expected = sorted(
             members for label in set(labels.tolist())
             if len(members := np.flatnonzero(labels == label).tolist()) > 1
         )
-        groups = overlapping_groups(lines, bounding_boxes(lines), np.ones(count, dtype=bool),
-                                    GATE, "projection")
-        assert groups == expected
+        assert overlapping_groups(lines, np.ones(count, dtype=bool), GATE, "projection") == (
+            expected
+        )
         # Unchanged polylines are not tested against each other.
-        assert overlapping_groups(lines, bounding_boxes(lines), np.zeros(count, dtype=bool),
-                                  GATE, "projection") == []
+        assert overlapping_groups(lines, np.zeros(count, dtype=bool), GATE, "projection") == []
 
 
 def test_join_does_not_link_polylines_with_empty_or_far_boxes():

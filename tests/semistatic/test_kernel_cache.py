@@ -18,7 +18,7 @@ def test_every_recorded_kernel_is_a_compiled_function_with_parsable_arguments():
     kernels = load_kernels()
     assert kernels
     for kernel in kernels:
-        dispatcher = kernel_cache._dispatcher(kernel)
+        dispatcher = kernel.dispatcher()
         assert isinstance(dispatcher, numba.core.registry.CPUDispatcher), kernel.function
         assert dispatcher.py_func.__qualname__ == kernel.function.rpartition(".")[2]
         for text in kernel.arguments:
@@ -105,9 +105,9 @@ def test_switch_off_or_one_cpu_compiles_nothing_here(monkeypatch):
     def no_process(*args, **kwargs):
         raise AssertionError("no worker may start")
 
-    monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
+    monkeypatch.setattr(kernel_cache, "start_worker", no_process)
     monkeypatch.setattr(kernel_cache, "uncached", list)
-    monkeypatch.setattr(kernel_cache, "_compile", no_process)
+    monkeypatch.setattr(kernel_cache, "compile_kernels", no_process)
     monkeypatch.setenv(kernel_cache.SWITCH, "0")
     assert kernel_cache.warm_kernel_cache(workers=1) is False
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
@@ -136,9 +136,9 @@ def test_an_interruption_stops_the_workers_at_once(monkeypatch):
 
     workers: list[Worker] = []
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
-    monkeypatch.setattr(kernel_cache, "_start_worker", Worker)
+    monkeypatch.setattr(kernel_cache, "start_worker", Worker)
     monkeypatch.setattr(kernel_cache, "uncached", list)
-    monkeypatch.setattr(kernel_cache, "_compile", interrupted)
+    monkeypatch.setattr(kernel_cache, "compile_kernels", interrupted)
     with pytest.raises(KeyboardInterrupt):
         kernel_cache.warm_kernel_cache(workers=2)
     assert len(workers) == 2
@@ -146,7 +146,7 @@ def test_an_interruption_stops_the_workers_at_once(monkeypatch):
 
 
 def test_a_kernel_that_cannot_be_compiled_is_left_to_lazy_compilation():
-    kernel_cache._compile([
+    kernel_cache.compile_kernels([
         Kernel("semistatic.frames.no_such_kernel", ("float64",), 0.1),
         Kernel("semistatic.frames.wrap_angle_compiled", ("complex128",), 0.1),
     ])
@@ -203,9 +203,9 @@ def test_no_worker_is_forked_beside_other_threads_or_in_a_daemonic_process(monke
         raise AssertionError("no worker may start")
 
     monkeypatch.setenv(kernel_cache.SWITCH, "1")
-    monkeypatch.setattr(kernel_cache, "_start_worker", no_process)
+    monkeypatch.setattr(kernel_cache, "start_worker", no_process)
     monkeypatch.setattr(kernel_cache, "uncached", list)
-    monkeypatch.setattr(kernel_cache, "_compile", no_process)
+    monkeypatch.setattr(kernel_cache, "compile_kernels", no_process)
     monkeypatch.setattr(kernel_cache.threading, "active_count", lambda: 2)
     assert kernel_cache.warm_kernel_cache(workers=1) is False
     monkeypatch.setattr(kernel_cache.threading, "active_count", lambda: 1)
@@ -228,7 +228,7 @@ kernels = [
 kernel_cache.load_kernels = lambda path=None: kernels
 print(kernel_cache.warm_kernel_cache(workers=1))
 print(len(kernel_cache.uncached(kernels)))
-print(sorted(len(kernel_cache._dispatcher(kernel).overloads) for kernel in kernels))
+print(sorted(len(kernel.dispatcher().overloads) for kernel in kernels))
 """
 
 

@@ -1,4 +1,7 @@
-"""Per-segment local maps: safety-area filter, frames, life cycle, GeoJSON (DESIGN.md 9-10)."""
+"""Per-segment local maps: safety-area filter, frames, life cycle, GeoJSON.
+
+(docs/design.md#detail-9, #detail-10.)
+"""
 
 from __future__ import annotations
 

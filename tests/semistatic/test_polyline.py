@@ -1,9 +1,11 @@
+import pickle
+
 import numpy as np
 import pytest
 import shapely
 
 from semistatic.frames import inverse
-from semistatic.polyline import EMPTY_BOX, Polyline, as_polyline, pack_vertices, run_boxes
+from semistatic.polyline import EMPTY_BOX, PackedPolylines, Polyline, as_polyline, as_polylines
 
 
 def test_defaults_and_dtypes():
@@ -74,13 +76,81 @@ def test_as_polyline_passes_polylines_through_and_wraps_arrays():
     assert len(as_polyline([])) == 0
 
 
-def test_run_boxes_are_the_bounds_of_each_run():
+def test_reversed_runs_backwards_and_keeps_the_indices_with_their_vertices():
+    line = Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]], scan_indices=[4, 5, 9])
+    back = line.reversed()
+    np.testing.assert_array_equal(back.points, line.points[::-1])
+    np.testing.assert_array_equal(back.scan_indices, [9, 5, 4])
+    assert back.length == line.length
+    assert not back.points.flags.writeable
+    assert len(Polyline(np.empty((0, 2))).reversed()) == 0
+
+
+def test_packed_boxes_are_the_bounds_of_each_polyline():
     rng = np.random.default_rng(3)
     runs = [rng.normal(size=(int(rng.integers(0, 4)), 2)) for _ in range(30)]
-    points, offsets = pack_vertices(runs)
-    boxes = run_boxes(points, offsets)
-    for run, box in zip(runs, boxes.tolist(), strict=True):
+    lines = PackedPolylines(runs)
+    for run, box in zip(runs, lines.boxes.tolist(), strict=True):
         if len(run) == 0:
             assert tuple(box) == EMPTY_BOX
         else:
             assert box == shapely.bounds(shapely.multipoints(run)).tolist()
+
+
+def test_packed_polylines_hold_their_vertices_and_scan_indices_packed():
+    first, second = Polyline([[0.0, 0.0], [1.0, 0.0]], [3, 7]), Polyline([[2.0, 2.0]], [1])
+    lines = as_polylines([first, second, []])
+    assert lines[0] is first
+    assert lines[1] is second
+    assert len(lines[2]) == 0
+    np.testing.assert_array_equal(lines.points, [[0.0, 0.0], [1.0, 0.0], [2.0, 2.0]])
+    np.testing.assert_array_equal(lines.offsets, [0, 2, 3, 3])
+    np.testing.assert_array_equal(lines.scan_indices, [3, 7, 1])
+    assert as_polylines(lines) is lines
+    assert len(as_polylines([])) == 0
+    assert as_polylines([]).points.shape == (0, 2)
+
+
+def test_polylines_from_runs_are_views_of_one_read_only_copy():
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0], [4.0, 2.0]])
+    lines = PackedPolylines.from_runs(points, [0, 2, 2, 5], [9, 8, 1, 2, 3])
+    assert [len(line) for line in lines] == [2, 0, 3]
+    np.testing.assert_array_equal(lines[2].points, points[2:])
+    np.testing.assert_array_equal(lines[2].scan_indices, [1, 2, 3])
+    assert lines.points is points  # the kernels' array, taken over
+    assert not lines[0].points.flags.writeable
+    assert not np.shares_memory(lines[0].points, points)
+    default = PackedPolylines.from_runs(points.copy(), [0, 2, 5])
+    assert [line.scan_indices.tolist() for line in default] == [[0, 1], [0, 1, 2]]
+
+
+@pytest.mark.parametrize(
+    ("points", "offsets", "indices", "message"),
+    [
+        ([[0.0, np.nan]], [0, 1], None, "finite"),
+        ([[0.0, 0.0], [1.0, 0.0]], [0, 1], None, "offsets from 0 to N"),
+        ([[0.0, 0.0], [1.0, 0.0]], [0, 2, 1, 2], None, "decrease"),
+        ([[0.0, 0.0], [1.0, 0.0]], [0, 2], [4], "one scan index per vertex"),
+    ],
+)
+def test_runs_that_make_no_polylines_are_rejected(points, offsets, indices, message):
+    with pytest.raises(ValueError, match=message):
+        PackedPolylines.from_runs(np.array(points), offsets, indices)
+
+
+def test_packed_polylines_are_read_only_compare_as_sequences_and_pickle():
+    lines = PackedPolylines([[[0.0, 0.0], [1.0, 0.0]], [[2.0, 0.0]]])
+    for change in (lambda: lines.append(lines[0]), lambda: lines.pop(), lines.clear,
+                   lambda: lines.__setitem__(0, lines[1]), lambda: lines.__delitem__(0)):
+        with pytest.raises(TypeError, match="read-only"):
+            change()
+    assert lines == tuple(lines)
+    assert tuple(lines) == lines
+    assert lines == list(lines)
+    assert lines != (lines[0],)
+    assert PackedPolylines() == ()
+    copy = pickle.loads(pickle.dumps(lines))
+    assert isinstance(copy, PackedPolylines)
+    assert len(copy) == 2
+    np.testing.assert_array_equal(copy.points, lines.points)
+    np.testing.assert_array_equal(copy.offsets, lines.offsets)

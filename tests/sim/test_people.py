@@ -11,7 +11,7 @@ from sim.client import SimClient
 from sim.contacts import ContactMonitor
 from sim.ground_truth import people_positions
 from sim.laser import RaycastLaser
-from sim.people import PARKED_Z, People, _Walk, person_position
+from sim.people import PARKED_Z, People, person_position
 from sim.ugv import SimUGV
 from sim.world_builder import SimWorld
 from tests.sim.random_scenes import simple_path
@@ -107,28 +107,6 @@ def test_lasers_see_a_present_person_and_not_a_parked_one():
 
 
 # ------------------------------------------- the per-step fast path and skipped teleports
-
-ROUTES = {
-    "l_route": PersonSpec("p", L_ROUTE, speed=1.3, start_time=0.7),
-    "loop": PersonSpec("p", L_ROUTE, speed=0.9, loop=True),
-    "single": PersonSpec("p", ((2.0, 1.0),)),
-    "repeated": PersonSpec("p", ((0.0, 0.0), (1.0, 0.0), (1.0, 0.0), (1.0, 1.0))),
-    "closed_loop": PersonSpec("p", ((0.0, 0.0), (1.0, 0.0), (0.0, 0.0)), loop=True),
-}
-
-
-@pytest.mark.parametrize("name", sorted(ROUTES))
-def test_precomputed_walk_is_person_position_to_the_last_bit(name):
-    person = ROUTES[name]
-    walk = _Walk(person)
-    times = [*np.random.default_rng(1).uniform(-1.0, 40.0, 500).tolist(), 0.0, 0.7, 12.0]
-    for t in times:
-        expected = person_position(person, t)
-        if expected is None:
-            assert walk.position(t) is None
-        else:
-            assert list(walk.position(t)) == expected.tolist()
-
 
 class CountingBullet:
     """Forward to a BulletClient, counting the teleports."""
