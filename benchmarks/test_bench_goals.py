@@ -36,6 +36,7 @@ from robots.ekf import EKFLocalizer
 from robots.follower import ChainedFormFollower
 from scenarios.bench.observer import ScanCallback
 from scenarios.bench.runner import run_scenario
+from scenarios.bench.sensors import VehicleSensors
 from scenarios.bench.vehicle import Vehicle
 from scenarios.spec.load import load_scenario
 from semistatic.kernel_cache import SWITCH
@@ -52,7 +53,7 @@ pytestmark = pytest.mark.bench
 STAGES = (
     (RaycastLaser, "hits", "ray cast (PyBullet rayTestBatch + hit lists)"),
     (RaycastLaser, "scan", "laser scan (cast + noise)"),
-    (Vehicle, "landmarks", "landmark detection"),
+    (VehicleSensors, "landmarks", "landmark detection"),
     (Vehicle, "_predict", "odometry + EKF predict"),
     (EKFLocalizer, "update", "EKF update (gate + filterpy)"),
     (ChainedFormFollower, "command", "follower command"),
