@@ -10,7 +10,8 @@ Examples
 --------
 >>> from scenarios import bundled_scenarios, load_scenario
 >>> bundled_scenarios()
-('pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet')
+('occlusion_hall', 'pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet', \
+'warehouse_occlusion')
 >>> load_scenario("pal3b").people
 ('walker',)
 """

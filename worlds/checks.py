@@ -307,7 +307,7 @@ def fields_along_path(
     >>> len(warning) == len(protective) == len(path_poses(load_world("sim1").path))
     True
     >>> [round(b, 2) for b in warning[0].bounds]  # aisle field at the start pose (1, 0, 0)
-    [1.25, -0.5, 2.4, 0.5]
+    [1.25, -0.95, 2.4, 0.95]
     """
     return _fields(path, float(step))
 
@@ -440,7 +440,7 @@ def box_warning_overlaps(world: WorldSpec, warning: Sequence[shapely.Polygon]) -
     >>> world = load_world("sim1")
     >>> overlaps = box_warning_overlaps(world, fields_along_path(world.path)[0])
     >>> {name: round(area, 3) for name, area in overlaps.items()}
-    {'carton_aisle': 0.055, 'pallet_turn': 0.158, 'carton_north': 0.068}
+    {'carton_aisle': 0.133, 'pallet_turn': 0.064, 'carton_north': 0.14}
     """
     tree = shapely.STRtree(list(warning))
     overlaps = {}
@@ -465,7 +465,7 @@ def box_protective_gaps(
     >>> world = load_world("sim1")
     >>> gaps = box_protective_gaps(world, fields_along_path(world.path)[1])
     >>> {name: round(gap, 3) for name, gap in gaps.items()}
-    {'carton_aisle': 0.13, 'pallet_turn': 0.122, 'carton_north': 0.088}
+    {'carton_aisle': 0.085, 'pallet_turn': 0.261, 'carton_north': 0.127}
     """
     union = (
         protective
@@ -487,7 +487,7 @@ def box_footprint_gaps(world: WorldSpec, swept: shapely.Geometry) -> dict[str, f
     >>> world = load_world("sim1")
     >>> gaps = box_footprint_gaps(world, swept_footprint(world.path))
     >>> {name: round(gap, 2) for name, gap in gaps.items()}
-    {'carton_aisle': 0.22, 'pallet_turn': 0.2, 'carton_north': 0.19}
+    {'carton_aisle': 0.54, 'pallet_turn': 0.77, 'carton_north': 0.41}
     """
     return {
         box.name: float(swept.distance(polygon))
@@ -625,7 +625,7 @@ def layout_problems(
     >>> world = load_world("pal1")
     >>> layout_problems(world)
     []
-    >>> back = dataclasses.replace(world.boxes[0], pose=(5.0, -0.9, 0.0))  # against the wall
+    >>> back = dataclasses.replace(world.boxes[0], pose=(5.0, -1.025, 0.0))  # against the wall
     >>> for problem in layout_problems(dataclasses.replace(world, boxes=(back,))):
     ...     print(problem)
     box 'carton_west': never enters a warning field (largest overlap 0.000 m2, needs >= 0.01 m2)

@@ -15,7 +15,7 @@ Examples
 Traceback (most recent call last):
 ...
 semistatic.errors.SpecError: sim_1: <file>: not a bundled world (did you mean 'sim1'?) \
-and no such file; bundled worlds: pal1, pal3, sim1, sim2, warehouse
+and no such file; bundled worlds: occlusion_hall, pal1, pal3, sim1, sim2, warehouse
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def bundled_worlds() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_worlds()
-    ('pal1', 'pal3', 'sim1', 'sim2', 'warehouse')
+    ('occlusion_hall', 'pal1', 'pal3', 'sim1', 'sim2', 'warehouse')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 

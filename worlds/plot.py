@@ -328,8 +328,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     >>> import contextlib, io, tempfile
     >>> with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()) as out:
     ...     status = main([tmp])
-    >>> status, out.getvalue().count(".png")
-    (0, 5)
+    >>> status, out.getvalue().count(".png")  # one per bundled world
+    (0, 6)
     """
     import matplotlib
 

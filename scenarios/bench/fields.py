@@ -18,8 +18,8 @@ Examples
 >>> spec = load_scenario("pal1")
 >>> fields = VehicleFields(spec, PIONEER3DX, scenario_world(spec))
 >>> field = fields.minimum_field("niches", speed=0.4)
->>> round(field.bounds[2], 3)   # reaches 0.6 m ahead of the bumper at 0.18 m
-0.782
+>>> round(field.bounds[2], 4)   # S_L = 0.14 + 0.1 + 0.2 + 0.15 m ahead of the bumper (0.1825)
+0.7725
 """
 
 from __future__ import annotations

@@ -393,11 +393,11 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         >>> from worlds.spec import BoxSpec
         >>> with Testbench("pal1") as bench:
         ...     bench.reset()
-        ...     bench.move_box("carton_west", (2.5, -0.75, 0.0))
+        ...     bench.move_box("carton_west", (2.5, -1.0, 0.0))
         ...     bench.add_box(BoxSpec("crate", (0.4, 0.4, 0.5), (6.0, 0.9, 0.0)))
         ...     bench.remove_box("trolley_niche")
         ...     [(box.name, box.pose) for box in bench.world.boxes]
-        [('carton_west', (2.5, -0.75, 0.0)), ('crate_corridor', (6.4, 1.0, 0.3)), \
+        [('carton_west', (2.5, -1.0, 0.0)), ('crate_corridor', (6.9, 1.15, 0.3)), \
 ('crate', (6.0, 0.9, 0.0))]
         """
         self._require_running()

@@ -12,7 +12,7 @@ Examples
 >>> from robots.presets import PIONEER3DX
 >>> stop = measure_stop(PIONEER3DX, speed=0.4)
 >>> round(stop.predicted, 3), abs(stop.measured - stop.predicted) < 0.02
-(0.152, True)
+(0.14, True)
 """
 
 from __future__ import annotations

@@ -123,11 +123,11 @@ def world_for_lap(
     >>> from worlds.load import load_world
     >>> from scenarios.spec.scenario import BoxMove
     >>> world = load_world("pal1")
-    >>> move = BoxMove(lap=2, action="move", box="carton_west", pose=(2.5, -0.75, 0.0))
+    >>> move = BoxMove(lap=2, action="move", box="carton_west", pose=(2.5, -1.0, 0.0))
     >>> world_for_lap(world, [move], lap=2).boxes[0].pose
-    (2.5, -0.75, 0.0)
+    (2.5, -1.0, 0.0)
     >>> world_for_lap(world, [move], lap=1).boxes[0].pose
-    (2.0, -0.75, 0.0)
+    (2.0, -1.0, 0.0)
     >>> add = BoxMove(lap=2, action="add", box="carton_west", pose=(1, 1, 0), size=(1, 1, 1))
     >>> world_for_lap(world, [add], lap=2)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
@@ -386,7 +386,7 @@ def check_scenario_layout(
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
-and no such file; bundled worlds: pal1, pal3, sim1, sim2, warehouse
+and no such file; bundled worlds: occlusion_hall, pal1, pal3, sim1, sim2, warehouse
     """
     footprint = robot_footprint(spec.robot, file=spec.source)
     world = scenario_world(spec)

@@ -27,6 +27,7 @@ from worlds.checks import (
     overlapping_solids,
     path_poses,
     people_in_obstacles,
+    segment_indices,
     spline_of,
     static_in_warning,
     swept_footprint,
@@ -46,6 +47,20 @@ PROTECTIVE_CLEARANCE = 0.05  # m between a box and any protective field
 FOOTPRINT_CLEARANCE = 0.10  # m between the swept robot footprint and boxes or walls
 MIN_WARNING_OVERLAP = 0.01  # m2 of a box inside one warning field
 
+# Protective fields by Sick's formula for the Pioneer at the worlds' 0.4 m/s, by hand:
+# S_A = 2 scans of 80 ms at 0.4 m/s (0.064 m) + the follower's 1 m/s^2 ramp in 20 ms steps
+# (19 steps 0.38 ... 0.02 m/s held 20 ms: 0.076 m) = 0.14 m; S_L = S_A + Z_G + Z_R + Z_F
+# from the front of the URDF body (4.5 cm behind the centred footprint's), and at least
+# Z_G past the LMS100's blind zone (mounted at x 0.12, nothing nearer than 0.5 m);
+# S_B = the body's width + 2 (Z_G + Z_R + Z_F). Z_R only where a post (a retroreflector)
+# stands within 1 m of the segment's swept protective field.
+PIONEER_FRONT = FOOTPRINT_HALF_LENGTH - 0.045
+STOPPING_DISTANCE = 0.4 * 0.16 + 0.02 * sum(0.4 - 0.02 * k for k in range(1, 20))
+Z_G, Z_R, Z_F = 0.1, 0.2, 0.15  # general, reflector, ground clearance (6 cm < 12 cm)
+REFLECTOR_RANGE = 1.0  # m
+BLIND_ZONE_END = 0.12 + 0.5  # m ahead of the axle
+FIELD_MARGIN = 0.01  # m a field may exceed the formula: sized by it, not drawn large
+
 FOOTPRINT = shapely.box(
     -FOOTPRINT_HALF_LENGTH, -FOOTPRINT_HALF_WIDTH, FOOTPRINT_HALF_LENGTH, FOOTPRINT_HALF_WIDTH
 )
@@ -64,8 +79,8 @@ def name(request: pytest.FixtureRequest) -> str:
     return request.param
 
 
-def test_bundled_worlds_are_the_papers_environments_and_the_warehouse():
-    assert bundled_worlds() == (*PAPER_WORLDS, "warehouse")
+def test_bundled_worlds_are_the_papers_environments_the_warehouse_and_the_occlusion_hall():
+    assert bundled_worlds() == ("occlusion_hall", *PAPER_WORLDS, "warehouse")
 
 
 def test_world_loads_with_its_name_and_source(name):
@@ -89,17 +104,33 @@ def test_path_curvature_is_gentle(name):
     assert np.max(np.abs(path.curvature(s))) < 1.0
 
 
+def required_protective(near_reflector: bool) -> tuple[float, float]:
+    """Return how far ahead of the axle (m) and how wide (m) the formula asks the field."""
+    supplements = Z_G + Z_F + (Z_R if near_reflector else 0.0)
+    reach = max(PIONEER_FRONT + STOPPING_DISTANCE + supplements, BLIND_ZONE_END + Z_G)
+    return reach, 2.0 * FOOTPRINT_HALF_WIDTH + 2.0 * supplements
+
+
 def test_fields_suit_a_pioneer_3dx(name):
-    world, _ = world_and_path(name)
-    for segment in world.path.segments:
+    world, path = world_and_path(name)
+    s, _ = path.sample(PATH_STEP)
+    driven = segment_indices(world.path, s)
+    _, placed = fields_along_path(world.path, PATH_STEP)
+    posts = shapely.multipoints([post.xy for post in world.posts])
+    for index, segment in enumerate(world.path.segments):
+        swept = shapely.union_all([f for f, i in zip(placed, driven, strict=True) if i == index])
+        reach, width = required_protective(swept.distance(posts) <= REFLECTOR_RANGE)
         protective = np.array(segment.protective)
         warning = np.array(segment.warning)
-        assert protective[:, 0].min() >= FOOTPRINT_HALF_LENGTH
-        assert protective[:, 0].max() <= 0.6
-        assert np.abs(protective[:, 1]).max() <= 0.3
-        assert np.abs(protective[:, 1]).max() >= FOOTPRINT_HALF_WIDTH  # covers the body width
+        assert protective[:, 0].min() >= FOOTPRINT_HALF_LENGTH, segment.name
+        # A rectangle symmetric about the centre line, as long and wide as the formula asks.
+        assert shapely.Polygon(protective).equals(shapely.box(*shapely.Polygon(protective).bounds))
+        assert protective[:, 1].max() == pytest.approx(-protective[:, 1].min())
+        assert reach <= protective[:, 0].max() <= reach + FIELD_MARGIN, segment.name
+        assert width <= np.ptp(protective[:, 1]) <= width + FIELD_MARGIN, segment.name
+        assert shapely.Polygon(warning).contains(shapely.Polygon(protective)), segment.name
         assert warning[:, 0].max() <= 1.4
-        assert np.abs(warning[:, 1]).max() <= 0.5
+        assert np.abs(warning[:, 1]).max() <= 1.0
 
 
 def test_footprint_constant_is_the_pioneer_base():
@@ -224,8 +255,10 @@ def broken_layouts() -> dict[str, tuple[WorldSpec, set[tuple[str, str, tuple[str
                 ("footprint", aisle, ("carton_aisle",)),
             },
         ),
+        # Flush against the outer wall's face (y -1.45): the carton's north face lies on
+        # the aisle warning field's edge (y -0.95) and barely touches it.
         "box against the wall": (
-            with_box(sim1, 0, pose=(3.0, -1.15, 0.0)),
+            with_box(sim1, 0, pose=(3.0, -1.2, 0.0)),
             {("warning", aisle, ("carton_aisle",))},
         ),
         "box in the wall": (
@@ -243,9 +276,11 @@ def broken_layouts() -> dict[str, tuple[WorldSpec, set[tuple[str, str, tuple[str
             dataclasses.replace(sim1, walls=(*sim1.walls, WallSpec((4.5, -0.2), (4.5, 0.2)))),
             {("static", "walls[5]", ()), ("footprint", "walls[5]", ()), ("posts", "path", ())},
         ),
+        # In the north office's door (x 2.0-3.0), where the walker goes, 0.55 m beyond the
+        # offices' warning fields (|y| <= 0.85 along y = 0).
         "box in the walker's way": (
             dataclasses.replace(
-                pal3, boxes=(*pal3.boxes, BoxSpec("crate", (0.4, 0.4, 0.5), (2.5, -0.7, 0.0)))
+                pal3, boxes=(*pal3.boxes, BoxSpec("crate", (0.4, 0.4, 0.5), (2.5, 1.6, 0.0)))
             ),
             {
                 ("people", "person 'walker'", ("crate",)),
@@ -281,5 +316,9 @@ def test_clearances_change_the_verdict():
     closest = min(box_protective_gaps(world, protective).values())
     strict = Clearances(protective=closest + 0.01)
     assert [p.check for p in layout_problems(world, clearances=strict)] == ["protective"]
-    wide_robot = np.array(PIONEER_FOOTPRINT) * [1.0, 2.0]
-    assert {p.check for p in layout_problems(world, footprint=wide_robot)} == {"footprint"}
+    gaps = box_footprint_gaps(world, swept_footprint(world.path, PIONEER_FOOTPRINT, PATH_STEP))
+    nearest = min(gaps, key=gaps.get)
+    # Its sides moved out by the nearest box's gap, the robot sweeps up to that box.
+    wide_robot = np.array(PIONEER_FOOTPRINT) * [1.0, 1.0 + gaps[nearest] / FOOTPRINT_HALF_WIDTH]
+    problems = layout_problems(world, footprint=wide_robot)
+    assert [(p.check, p.boxes) for p in problems] == [("footprint", (nearest,))]

@@ -45,13 +45,18 @@ def test_layout_passes_every_check_for_the_lgv():
     assert layout_problems(WORLD, footprint=np.array(LGV.footprint), clearances=Clearances()) == []
 
 
-def test_every_box_is_in_a_warning_field_and_the_worker_crosses_the_lane():
+def test_every_box_is_in_a_warning_field_and_both_workers_cross_the_lane():
     warning, _ = fields_along_path(WORLD.path, 0.05)
     union = shapely.union_all(list(warning))
     for box in WORLD.boxes:
         corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * np.array(box.size[:2]) / 2
         footprint = shapely.Polygon(corners + np.array(box.pose[:2]))
         assert union.intersection(footprint).area > 0.01, box.name
-    (worker,) = WORLD.people
+    people = {person.name: person for person in WORLD.people}
+    assert set(people) == {"worker", "hiding_worker"}
     lane = shapely.LineString(path_poses(WORLD.path, 0.05)[:, :2]).buffer(0.5)
-    assert lane.intersects(shapely.LineString(worker.waypoints))
+    for person in people.values():
+        assert lane.intersects(shapely.LineString(person.waypoints)), person.name
+    # The hiding worker waits with their whole body outside every warning field.
+    hiding = people["hiding_worker"]
+    assert not union.intersects(shapely.Point(hiding.waypoints[0]).buffer(hiding.radius))
