@@ -129,20 +129,20 @@ def test_a_bench_must_be_reset_before_stepping(tiny_spec):
 def code_world() -> WorldSpec:
     """The tiny world of the TOML test files, built in code."""
     walls = (
-        WallSpec((-2.5, -1.2), (6.5, -1.2)), WallSpec((-2.5, 1.2), (6.5, 1.2)),
-        WallSpec((-2.5, -1.2), (-2.5, 1.2)), WallSpec((6.5, -1.2), (6.5, 1.2)),
+        WallSpec((-2.5, -1.5), (6.5, -1.5)), WallSpec((-2.5, 1.5), (6.5, 1.5)),
+        WallSpec((-2.5, -1.5), (-2.5, 1.5)), WallSpec((6.5, -1.5), (6.5, 1.5)),
     )
-    posts = tuple(PostSpec(x, -1.09) for x in (-2.0, 0.0, 2.0, 4.0, 6.0)) + tuple(
-        PostSpec(x, 1.09) for x in (-1.0, 1.0, 3.0, 5.0)
+    posts = tuple(PostSpec(x, -1.39) for x in (-2.0, 0.0, 2.0, 4.0, 6.0)) + tuple(
+        PostSpec(x, 1.39) for x in (-1.0, 1.0, 3.0, 5.0)
     ) + (PostSpec(-2.39, 0.3), PostSpec(6.39, -0.3))
     segment = SegmentSpec(
         "corridor", 0, 2,
-        warning=((0.25, -0.5), (1.4, -0.5), (1.4, 0.5), (0.25, 0.5)),
-        protective=((0.25, -0.3), (0.6, -0.3), (0.6, 0.3), (0.25, 0.3)),
+        warning=((0.18, -0.9), (1.4, -0.9), (1.4, 0.9), (0.18, 0.9)),
+        protective=((0.18, -0.65), (0.78, -0.65), (0.78, 0.65), (0.18, 0.65)),
     )
     path = PathSpec(((0.0, 0.0), (1.75, 0.0), (3.5, 0.0)), (segment,), speed=0.4)
     return WorldSpec(name="tiny", walls=walls, posts=posts,
-                     boxes=(BoxSpec("carton", (0.5, 0.5, 0.6), (2.0, -0.72, 0.0)),),
+                     boxes=(BoxSpec("carton", (0.5, 0.4, 0.6), (2.6, -1.0, 0.0)),),
                      people=(), path=path)
 
 
@@ -160,11 +160,12 @@ def test_a_box_pushed_mid_lap_is_mapped_where_it_now_stands(tiny_spec):
         bench.reset()
         while bench.sim_time < 1.0:
             bench.step()
-        # Before the robot reaches it, the carton is pushed 20 cm towards the wall.
-        bench.move_box("carton", (2.0, -0.92, 0.0))
+        # Before the robot reaches it, the carton is pushed 40 cm along the wall.
+        bench.move_box("carton", (3.0, -1.0, 0.0))
         log = bench.run()
     truth = log.truth_after_lap[0]["carton"]
-    assert truth[:, 1].max() == pytest.approx(-0.67)
+    assert (truth[:, 0].min(), truth[:, 0].max()) == pytest.approx((2.75, 3.25))
+    assert truth[:, 1].max() == pytest.approx(-0.8)
     assert log.laps[0].detection["f1"] == 1.0
 
 
