@@ -78,6 +78,25 @@ def _circle(x: float, y: float, radius: float, quad_segs: int):
     return shapely.Point(x, y).buffer(radius, quad_segs=quad_segs)
 
 
+def _test_piece_section(piece, scan_height: float, quad_segs: int):
+    """Return a test piece's cross-section by the plane at ``scan_height``, or ``None``."""
+    if not piece.lying:
+        if piece.length + _HEIGHT_TOLERANCE > scan_height:
+            return _circle(piece.pose[0], piece.pose[1], 0.5 * piece.diameter, quad_segs)
+        return None
+    radius = 0.5 * piece.diameter
+    if scan_height <= 0.0:
+        width = piece.diameter
+    elif scan_height < piece.diameter:
+        width = 2.0 * math.sqrt(radius**2 - (scan_height - radius) ** 2)
+    else:
+        return None
+    x, y, yaw = piece.pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    half = np.array([[1, -1], [1, 1], [-1, 1], [-1, -1]]) * [0.5 * piece.length, 0.5 * width]
+    return shapely.Polygon(half @ np.array([[c, s], [-s, c]]) + [x, y])
+
+
 def people_positions(world) -> dict[str, np.ndarray]:
     """Return the true ``(x, y)`` of every person present in the scene, read from the engine.
 
@@ -114,9 +133,11 @@ def obstacle_footprints(
 ) -> dict:
     """Return ``{name: shapely.Polygon}`` of every obstacle footprint, world frame.
 
-    Walls, posts and boxes always; people (at their current engine positions) when
-    ``world`` is a ``SimWorld`` and ``include_people``. Objects not taller than
-    ``scan_height`` are left out: a laser plane at that height passes over them. Round
+    Walls, posts, boxes and test pieces always; people (at their current engine
+    positions) when ``world`` is a ``SimWorld`` and ``include_people``. Objects not taller
+    than ``scan_height`` are left out: a laser plane at that height passes over them. A
+    lying test piece is cut where the plane crosses it, a strip ``2 sqrt(r^2 - (h - r)^2)``
+    wide along its axis (its whole footprint at ``scan_height`` 0, the floor plan). Round
     footprints are polygons with ``4 * quad_segs`` sides.
 
     Examples
@@ -131,6 +152,13 @@ def obstacle_footprints(
     (['post_0', 'wall_0'], ['wall_0'])
     >>> round(obstacle_footprints(spec)["wall_0"].area, 3)
     0.2
+    >>> import dataclasses
+    >>> from worlds.spec import TestPieceSpec
+    >>> lying = dataclasses.replace(spec, test_pieces=(TestPieceSpec("tp1", "lying", (3, 0, 0)),))
+    >>> # the 0.2 m piece across 0.2 m, 0.17 m (2 sqrt(0.1^2 - 0.05^2)) at 0.15 m, 0 above
+    >>> [round(obstacle_footprints(lying, scan_height=h)["tp1"].bounds[3] * 2, 4)
+    ...  for h in (0.0, 0.1, 0.15)], "tp1" in obstacle_footprints(lying, scan_height=0.35)
+    ([0.2, 0.2, 0.1732], False)
     """
     footprints: dict[str, shapely.Geometry] = {}
 
@@ -146,6 +174,10 @@ def obstacle_footprints(
     for box in world.boxes:
         if tall_enough(box.size[2]):
             footprints[box.name] = shapely.Polygon(box.corners())
+    for piece in getattr(world, "test_pieces", ()):
+        section = _test_piece_section(piece, scan_height, quad_segs)
+        if section is not None:
+            footprints[piece.name] = section
     if include_people and hasattr(world, "sim"):
         positions = people_positions(world)
         for person in world.people:

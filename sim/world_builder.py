@@ -2,15 +2,18 @@
 
 ``SimWorld`` owns the bodies of one environment inside a ``sim.client.SimClient``: the
 floor plane, walls and semi-static boxes as boxes, landmark posts and people as
-cylinders (people are kinematic: ``sim.people`` moves them). Walls, boxes, posts and
-people are exact triangle-mesh prisms so that laser rays hit them to the micrometre.
+cylinders (people are kinematic: ``sim.people`` moves them), and the personnel-detection
+test pieces as cylinders standing or lying on the floor. Walls, boxes, posts, people and
+test pieces are exact triangle meshes (prisms) so that laser rays hit them to the
+micrometre.
 Every body gets a semantic tag and a remission (what a laser reads as intensity);
 ``remission_of`` maps the body ids that ``rayTestBatch`` returns to remissions in one
 vectorised lookup.
 
-All world bodies are static (mass 0): walls, posts and boxes do not move when the robot
-touches them, so the ground truth stays exactly the spec, and boxes move only when the
-experiment moves them between laps (``move_box``, ``add_box``, ``remove_box``).
+All world bodies are static (mass 0): walls, posts, boxes and test pieces do not move
+when the robot touches them, so the ground truth stays exactly the spec, and boxes move
+only when the experiment moves them between laps (``move_box``, ``add_box``,
+``remove_box``).
 
 Examples
 --------
@@ -36,7 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from worlds.spec import BoxSpec, PersonSpec, PostSpec, WallSpec, WorldSpec
+from worlds.spec import BoxSpec, PersonSpec, PostSpec, TestPieceSpec, WallSpec, WorldSpec
 
 __all__ = [
     "CIRCLE_SAGITTA",
@@ -46,11 +49,13 @@ __all__ = [
     "TAG_FLOOR",
     "TAG_PERSON",
     "TAG_POST",
+    "TAG_TEST_PIECE",
     "TAG_UNKNOWN",
     "TAG_WALL",
     "BodyInfo",
     "SimWorld",
     "circle_footprint",
+    "lying_cylinder_mesh",
     "prism_mesh",
     "wall_pose",
 ]
@@ -60,6 +65,7 @@ TAG_WALL = "wall"
 TAG_POST = "post"
 TAG_BOX = "box"
 TAG_PERSON = "person"
+TAG_TEST_PIECE = "test_piece"
 TAG_UNKNOWN = "unknown"
 
 NO_HIT_REMISSION = 0.0
@@ -83,6 +89,7 @@ _RGBA = {
     TAG_POST: (0.95, 0.85, 0.1, 1.0),
     TAG_BOX: (0.7, 0.45, 0.2, 1.0),
     TAG_PERSON: (0.2, 0.4, 0.9, 1.0),
+    TAG_TEST_PIECE: (0.1, 0.1, 0.1, 1.0),
 }
 
 
@@ -160,6 +167,25 @@ def prism_mesh(footprint: ArrayLike, height: float) -> tuple[np.ndarray, np.ndar
     return vertices, indices
 
 
+def lying_cylinder_mesh(diameter: float, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(vertices (2N, 3), indices (M,))`` of a closed cylinder lying on the floor.
+
+    Its axis runs along x at height ``diameter / 2``, from ``-length / 2`` to ``length / 2``:
+    the vertical prism of :func:`prism_mesh` over :func:`circle_footprint`, its axes
+    renamed cyclically (z to x, x to y, y to z), a rotation, so faces stay wound outwards.
+
+    Examples
+    --------
+    >>> vertices, indices = lying_cylinder_mesh(0.2, 0.6)
+    >>> vertices.min(axis=0).round(6).tolist(), vertices.max(axis=0).round(6).tolist()
+    ([-0.3, -0.1, 0.0], [0.3, 0.1, 0.2])
+    """
+    radius = 0.5 * diameter
+    vertices, indices = prism_mesh(circle_footprint(radius), length)
+    u, v, w = vertices.T
+    return np.column_stack([w - 0.5 * length, u, v + radius]), indices
+
+
 class SimWorld:
     """The PyBullet bodies of one ``WorldSpec`` inside a ``SimClient``.
 
@@ -211,6 +237,8 @@ class SimWorld:
             self.add_box(box)
         for person in spec.active_people:
             self._add_person(person)
+        for piece in spec.test_pieces:
+            self._add_test_piece(piece)
 
     # ----------------------------------------------------------------- queries
 
@@ -228,6 +256,11 @@ class SimWorld:
     def posts(self) -> tuple[PostSpec, ...]:
         """Return the landmark posts of the spec (they never move)."""
         return self.spec.posts
+
+    @property
+    def test_pieces(self) -> tuple[TestPieceSpec, ...]:
+        """Return the personnel-detection test pieces of the spec (they never move)."""
+        return self.spec.test_pieces
 
     @property
     def people(self) -> tuple[PersonSpec, ...]:
@@ -269,7 +302,7 @@ class SimWorld:
         return info
 
     def tag_of(self, body_id: int) -> str:
-        """Return the semantic tag of ``body_id``: floor, wall, post, box, person or unknown."""
+        """Return the tag of ``body_id``: floor, wall, post, box, person, test_piece or unknown."""
         return self.info(body_id).tag
 
     def name_of(self, body_id: int) -> str:
@@ -392,8 +425,19 @@ class SimWorld:
         5 mm on cylinders, 1.5 mm on boxes near edges), rays against triangles are exact.
         The body frame sits on the floor under the footprint's origin.
         """
-        bullet = self._bullet
         vertices, indices = prism_mesh(footprint, height)
+        return self._add_mesh(info, vertices, indices, visual, pose)
+
+    def _add_mesh(
+        self,
+        info: BodyInfo,
+        vertices: np.ndarray,
+        indices: np.ndarray,
+        visual: int,
+        pose: tuple[float, float, float],
+    ) -> int:
+        """Create a static body of the triangle mesh, its frame at ``pose`` on the floor."""
+        bullet = self._bullet
         shape = bullet.createCollisionShape(
             bullet.GEOM_MESH, vertices=vertices.tolist(), indices=indices.tolist()
         )
@@ -444,3 +488,22 @@ class SimWorld:
         x, y = person.waypoints[0]
         info = BodyInfo(person.name, TAG_PERSON, person.remission)
         return self._add_cylinder(info, x, y, person.radius, person.height)
+
+    def _add_test_piece(self, piece: TestPieceSpec) -> int:
+        self._require_new_name(piece.name, "test piece")
+        info = BodyInfo(piece.name, TAG_TEST_PIECE, piece.remission)
+        if not piece.lying:
+            x, y, _ = piece.pose
+            return self._add_cylinder(info, x, y, 0.5 * piece.diameter, piece.length)
+        radius = 0.5 * piece.diameter
+        vertices, indices = lying_cylinder_mesh(piece.diameter, piece.length)
+        visual = self._bullet.createVisualShape(
+            self._bullet.GEOM_CYLINDER,
+            radius=radius,
+            length=piece.length,
+            visualFramePosition=[0.0, 0.0, radius],
+            # Bullet's cylinder stands along z; a quarter turn about y lays it along x.
+            visualFrameOrientation=self._bullet.getQuaternionFromEuler([0.0, 0.5 * np.pi, 0.0]),
+            rgbaColor=_RGBA[TAG_TEST_PIECE],
+        )
+        return self._add_mesh(info, vertices, indices, visual, piece.pose)

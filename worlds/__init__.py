@@ -1,4 +1,4 @@
-"""Environments as data: walls, reflective posts, semi-static boxes, people, the path.
+"""Environments as data: walls, reflective posts, semi-static boxes, people, test pieces, the path.
 
 Examples
 --------
@@ -18,6 +18,7 @@ from worlds.spec import (
     PersonSpec,
     PostSpec,
     SegmentSpec,
+    TestPieceSpec,
     WallSpec,
     WorldSpec,
 )
@@ -31,6 +32,7 @@ __all__ = [
     "PostSpec",
     "SegmentSpec",
     "SpecError",
+    "TestPieceSpec",
     "WallSpec",
     "WorldSpec",
     "bundled_worlds",

@@ -11,8 +11,13 @@ totally lie inside the warning or the protective areas", docs/design.md) has
   protective field (a box in a protective field would stop the robot for good);
 - walls and posts out of every warning field (only semi-static objects slow the robot);
 - the robot's footprint, swept along the path, clear of boxes and walls;
-- boxes and posts standing free (not inside walls or each other) and people walking in
-  free space.
+- boxes, posts and test pieces standing free (not inside walls or each other) and people
+  walking in free space.
+
+The personnel-detection test pieces (:class:`~worlds.spec.TestPieceSpec`) belong on the
+path: no field or footprint check applies to them. Whether a vehicle's safety laser can see
+one depends on its scan plane's height, :func:`piece_scan_margins` (the robot is the
+scenario's: ``scenarios.spec.pieces`` turns the margins into findings).
 
 Each check is a pure function that returns its measure (gaps in m, overlap areas in m2,
 post counts), so tests can assert on numbers; :func:`layout_problems` turns the measures
@@ -62,6 +67,7 @@ __all__ = [
     "overlapping_solids",
     "path_poses",
     "people_in_obstacles",
+    "piece_scan_margins",
     "placed",
     "post_discs",
     "segment_indices",
@@ -527,11 +533,44 @@ def static_in_warning(world: WorldSpec, warning: Sequence[shapely.Polygon]) -> l
     return [label for label, polygon in labelled if tree.query(polygon, "intersects").size]
 
 
-def overlapping_solids(world: WorldSpec) -> list[tuple[str, str]]:
-    """Return pairs of solids whose footprints overlap: a box or post in a wall or each other.
+def piece_scan_margins(world: WorldSpec, scan_height: float) -> dict[str, float]:
+    """Return, per test piece, how far (m) its top rises above a scan plane at ``scan_height``.
 
-    Solids are labelled ``"box 'name'"``, ``"posts[j]"`` and ``"walls[i]"``; walls may meet
-    each other (corners), so wall pairs are not checked.
+    Positive: the plane cuts the piece (a lying piece's top is its diameter, an upright
+    piece's its height); zero or negative: the plane passes over it, and a safety laser
+    scanning there cannot detect it.
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from worlds.load import load_world
+    >>> from worlds.spec import TestPieceSpec
+    >>> pieces = (TestPieceSpec("lying", "lying", (3.0, 0.0, np.pi / 2)),
+    ...           TestPieceSpec("upright", "upright", (5.0, 0.0, 0.0)))
+    >>> world = dataclasses.replace(load_world("sim1"), test_pieces=pieces)
+    >>> {name: round(gap, 3) for name, gap in piece_scan_margins(world, 0.35).items()}
+    {'lying': -0.15, 'upright': 0.05}
+    """
+    return {piece.name: piece.top - float(scan_height) for piece in world.test_pieces}
+
+
+def _solids(world: WorldSpec) -> list[tuple[str, shapely.Polygon]]:
+    """Return the labelled footprints of boxes, posts and test pieces."""
+    solids = [
+        (f"box {box.name!r}", polygon)
+        for box, polygon in zip(world.boxes, box_polygons(world), strict=True)
+    ]
+    solids += [(f"posts[{i}]", disc) for i, disc in enumerate(post_discs(world))]
+    solids += [(f"test piece {piece.name!r}", piece.footprint()) for piece in world.test_pieces]
+    return solids
+
+
+def overlapping_solids(world: WorldSpec) -> list[tuple[str, str]]:
+    """Return pairs of solids whose footprints overlap: in a wall or in each other.
+
+    Solids are boxes, posts and test pieces, labelled ``"box 'name'"``, ``"posts[j]"`` and
+    ``"test piece 'name'"``, and walls, ``"walls[i]"``; walls may meet each other
+    (corners), so wall pairs are not checked.
 
     Examples
     --------
@@ -544,11 +583,7 @@ def overlapping_solids(world: WorldSpec) -> list[tuple[str, str]]:
     >>> overlapping_solids(dataclasses.replace(world, boxes=(box,)))
     [("box 'carton_aisle'", 'walls[0]')]
     """
-    solids = [
-        (f"box {box.name!r}", polygon)
-        for box, polygon in zip(world.boxes, box_polygons(world), strict=True)
-    ]
-    solids += [(f"posts[{i}]", disc) for i, disc in enumerate(post_discs(world))]
+    solids = _solids(world)
     walls = list(enumerate(wall_polygons(world)))
     pairs = []
     for index, (label, polygon) in enumerate(solids):
@@ -576,12 +611,12 @@ def people_in_obstacles(world: WorldSpec) -> dict[str, tuple[str, ...]]:
     >>> people_in_obstacles(load_world("pal3"))
     {}
     """
-    labelled = [
-        (f"box {box.name!r}", polygon)
-        for box, polygon in zip(world.boxes, box_polygons(world), strict=True)
-    ]
+    solids = _solids(world)
+    boxes = len(world.boxes)
+    # Boxes, walls, then posts and test pieces: the order the messages have always listed.
+    labelled = solids[:boxes]
     labelled += [(f"walls[{i}]", polygon) for i, polygon in enumerate(wall_polygons(world))]
-    labelled += [(f"posts[{i}]", disc) for i, disc in enumerate(post_discs(world))]
+    labelled += solids[boxes:]
     blocked = {}
     for person in world.people:
         walk = (

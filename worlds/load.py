@@ -1,9 +1,10 @@
 """Load a world from TOML: a bundled name (``"pal1"``) or a path to a ``.toml`` file.
 
 The file mirrors :class:`~worlds.spec.WorldSpec`: top-level ``name`` (defaults to the file
-name), ``description``, arrays of tables ``walls``, ``posts``, ``boxes``, ``people`` and a
-``path`` table with ``knots`` and an array of ``segments``. Every key is checked (type,
-range, unknown keys with a "did you mean"), then the dataclasses check the geometry.
+name), ``description``, arrays of tables ``walls``, ``posts``, ``boxes``, ``people``,
+``test_pieces`` (optional) and a ``path`` table with ``knots`` and an array of
+``segments``. Every key is checked (type, range, unknown keys with a "did you mean"), then
+the dataclasses check the geometry.
 Any problem raises :class:`~semistatic.errors.SpecError` naming the file and the key.
 
 Examples

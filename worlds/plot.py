@@ -65,6 +65,7 @@ COLORS = {
     "post": "tab:blue",
     "box": "tab:brown",
     "person": "tab:purple",
+    "test_piece": "black",
     "path": "black",
     "warning": "gold",
     "protective": "red",
@@ -171,6 +172,11 @@ def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
     draw_posts(ax, spec.posts)
     for box in spec.boxes:
         draw_box(ax, box.corners(), box.name)
+    for piece in spec.test_pieces:
+        outline = np.asarray(piece.footprint().exterior.coords)
+        ax.add_patch(Polygon(outline, closed=True, facecolor=COLORS["test_piece"], zorder=6))
+        ax.annotate(f"{piece.name} ({piece.kind})", piece.pose[:2], textcoords="offset points",
+                    xytext=(4, 4), fontsize=7, color=COLORS["test_piece"])
 
     for index, segment in enumerate(spec.path.segments):
         start_s = float(path.knot_s[segment.start_knot])
@@ -250,7 +256,8 @@ def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
             color=COLORS["person"],
         )
 
-    ax.legend(handles=_legend_handles(), loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+    ax.legend(handles=_legend_handles(spec), loc="upper left", bbox_to_anchor=(1.01, 1.0),
+              fontsize=7)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xlabel("x [m]")
@@ -261,8 +268,8 @@ def plot_world(spec: WorldSpec, ax: Axes | None = None) -> Axes:
     return ax
 
 
-def _legend_handles() -> list:
-    return [
+def _legend_handles(spec: WorldSpec) -> list:
+    handles = [
         Patch(color=COLORS["wall"], label="wall"),
         Line2D([], [], ls="", marker="o", color=COLORS["post"], label="reflective post"),
         Patch(facecolor=COLORS["box"], edgecolor="black", label="semi-static box"),
@@ -272,6 +279,9 @@ def _legend_handles() -> list:
         Line2D([], [], color=COLORS["person"], marker="o", ms=3, label="person waypoints"),
         Patch(facecolor="none", edgecolor=COLORS["robot"], label="Pioneer 3-DX at start"),
     ]
+    if spec.test_pieces:
+        handles.append(Patch(color=COLORS["test_piece"], label="test piece"))
+    return handles
 
 
 def figure_size(spec: WorldSpec) -> tuple[float, float]:

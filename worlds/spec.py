@@ -1,7 +1,8 @@
 """Frozen dataclasses that describe an environment. No PyBullet, no I/O.
 
-A world is data: walls, reflective landmark posts, semi-static boxes, people and the
-robot's fixed path with its segments and per-segment safety fields. ``worlds.load``
+A world is data: walls, reflective landmark posts, semi-static boxes, people, the safety
+standard's personnel-detection test pieces and the robot's fixed path with its segments
+and per-segment safety fields. ``worlds.load``
 builds these from TOML; ``sim`` builds them into PyBullet bodies; ``robots`` and
 ``semistatic`` use the path, segments and fields.
 
@@ -49,12 +50,15 @@ __all__ = [
     "BOX_SIZE",
     "COORDINATE",
     "FIELD_POINT",
+    "TEST_PIECE_KINDS",
+    "TEST_PIECE_SIZES",
     "TRIGGERS",
     "BoxSpec",
     "PathSpec",
     "PersonSpec",
     "PostSpec",
     "SegmentSpec",
+    "TestPieceSpec",
     "WallSpec",
     "WorldSpec",
 ]
@@ -229,6 +233,128 @@ class BoxSpec:
     def corners(self) -> np.ndarray:
         """Return the ``(4, 2)`` footprint corners in the world frame, counter-clockwise."""
         return _rectangle(np.asarray(self.pose[:2]), self.pose[2], self.size[0], self.size[1])
+
+
+TEST_PIECE_KINDS = ("lying", "upright")
+"""The two personnel-detection test pieces: a cylinder lying on the floor (test piece 1, a
+person lying down) and one standing upright (test piece 2, a leg)."""
+
+TEST_PIECE_SIZES = {"lying": (0.2, 0.6), "upright": (0.07, 0.4)}
+"""Default ``(diameter, length)`` (m) of each kind, as ISO 3691-4 (and EN 1525 before it) is
+commonly quoted: test piece 1 200 mm across and 600 mm long, test piece 2 70 mm across and
+400 mm high. The standard's own text was not available to us: check it before relying on
+them; a piece's ``diameter`` and ``length`` override them."""
+
+
+@dataclass(frozen=True)
+class TestPieceSpec:
+    """A personnel-detection test piece: a static cylinder the vehicle must stop before.
+
+    A ``lying`` piece rests on the floor with its axis horizontal, along ``yaw`` (put it
+    at right angles to the direction of travel, as the standard does): its top is
+    ``diameter`` above the floor, so a safety laser whose scan plane lies higher passes
+    over it. An ``upright`` piece stands on its base, ``length`` high.
+
+    Parameters
+    ----------
+    name
+        Unique name (contacts and stops name it).
+    kind
+        ``lying`` (test piece 1, a person lying down) or ``upright`` (test piece 2, a leg).
+    pose
+        ``[x, y, yaw]`` of the centre of the piece's footprint on the floor and the
+        direction of a lying piece's axis (m, m, rad).
+    diameter
+        Diameter of the cylinder (m); default 0.2 for a lying piece, 0.07 for an
+        upright one (``TEST_PIECE_SIZES``).
+    length
+        Length of the cylinder along its axis (m): a lying piece's length, an upright
+        piece's height; default 0.6 lying, 0.4 upright.
+    remission
+        Share of laser light reflected (0-1).
+
+    Examples
+    --------
+    >>> piece = TestPieceSpec("tp1", kind="lying", pose=(3.0, 0.0, math.pi / 2))
+    >>> piece.diameter, piece.length, piece.top
+    (0.2, 0.6, 0.2)
+    >>> [round(b, 3) for b in piece.footprint().bounds]  # 0.2 m along x, 0.6 m along y
+    [2.9, -0.3, 3.1, 0.3]
+    >>> TestPieceSpec("tp2", kind="upright", pose=(3.0, 0.0, 0.0)).top
+    0.4
+    >>> TestPieceSpec("tp3", kind="standing", pose=(3.0, 0.0, 0.0))
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: kind: must be one of lying, upright, got 'standing'
+    """
+
+    __test__ = False  # a name starting with "Test" is not a test class
+
+    name: str = field(metadata=safe_name())
+    kind: str
+    pose: tuple[float, float, float] = field(metadata=COORDINATE)
+    diameter: float | None = field(
+        default=None, metadata=bounds(gt=0.0, le=2.0, fix="metres across, e.g. 0.2"))
+    length: float | None = field(
+        default=None, metadata=bounds(gt=0.0, le=5.0, fix="metres along the axis, e.g. 0.6"))
+    remission: float = field(default=0.3, metadata=UNIT_INTERVAL)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.kind not in TEST_PIECE_KINDS:
+            raise SpecError(MEMORY, "kind", f"must be one of {', '.join(TEST_PIECE_KINDS)}, "
+                            f"got {self.kind!r}{did_you_mean(self.kind, TEST_PIECE_KINDS)}")
+        diameter, length = TEST_PIECE_SIZES[self.kind]
+        # Filled in by kind: the two pieces' defaults differ, a dataclass default cannot.
+        if self.diameter is None:
+            _set(self, "diameter", diameter)
+        if self.length is None:
+            _set(self, "length", length)
+
+    @property
+    def lying(self) -> bool:
+        """Whether the piece lies on the floor (its axis horizontal)."""
+        return self.kind == "lying"
+
+    @property
+    def top(self) -> float:
+        """Height (m) of the piece's highest point above the floor."""
+        return self.diameter if self.lying else self.length
+
+    def cut_by(self, scan_height: float) -> bool:
+        """Return whether a horizontal scan plane at ``scan_height`` (m) passes through the piece.
+
+        A plane level with the top only grazes it (no return to rely on): not cut.
+
+        Examples
+        --------
+        >>> piece = TestPieceSpec("tp1", kind="lying", pose=(3.0, 0.0, 0.0))
+        >>> piece.cut_by(0.15), piece.cut_by(0.2), piece.cut_by(0.35)
+        (True, False, False)
+        """
+        return 0.0 < scan_height < self.top
+
+    def corners(self) -> np.ndarray:
+        """Return the ``(4, 2)`` corners, counter-clockwise, of the box round its footprint.
+
+        A lying piece's footprint is that rectangle (``length`` along the axis, ``diameter``
+        across); an upright piece's is the disc inside it.
+        """
+        along = self.length if self.lying else self.diameter
+        return _rectangle(np.asarray(self.pose[:2]), self.pose[2], along, self.diameter)
+
+    def footprint(self) -> shapely.Polygon:
+        """Return the piece's footprint on the floor (world frame) as a shapely polygon.
+
+        Examples
+        --------
+        >>> upright = TestPieceSpec("tp2", kind="upright", pose=(1.0, 2.0, 0.0))
+        >>> round(upright.footprint().area, 5), round(math.pi * 0.035**2, 5)
+        (0.00385, 0.00385)
+        """
+        if self.lying:
+            return shapely.Polygon(self.corners())
+        return shapely.Point(self.pose[:2]).buffer(0.5 * self.diameter, quad_segs=64)
 
 
 TRIGGERS = ("time", "distance", "meet")
@@ -543,7 +669,9 @@ def _unique(items: tuple[Any, ...], kind: str) -> None:
 class WorldSpec:
     """A whole environment. ``source`` is the file it was loaded from (for messages).
 
-    Posts must not overlap each other or a wall; names of boxes and people are unique.
+    Posts must not overlap each other or a wall; names of boxes and people are unique, and
+    so are the test pieces' (among themselves and against boxes and people: contacts name
+    them).
 
     Parameters
     ----------
@@ -561,6 +689,8 @@ class WorldSpec:
         The robot's path and its segments (table ``[path]``).
     description
         Free text.
+    test_pieces
+        Personnel-detection test pieces (array of tables ``[[test_pieces]]``).
     source
         Set by the loader to the file read; not a key of the file.
 
@@ -583,14 +713,22 @@ radii 0.04 + 0.04 m)
     people: tuple[PersonSpec, ...]
     path: PathSpec
     description: str = ""
+    # After description, so that every positional call of the older fields still works.
+    test_pieces: tuple[TestPieceSpec, ...] = ()
     source: str = MEMORY
 
     def __post_init__(self) -> None:
         check_fields(self)
-        for name in ("walls", "posts", "boxes", "people"):
+        for name in ("walls", "posts", "boxes", "people", "test_pieces"):
             _set(self, name, tuple(getattr(self, name)))
         _unique(self.boxes, "boxes")
         _unique(self.people, "people")
+        _unique(self.test_pieces, "test_pieces")
+        others = {item.name: kind for kind in ("boxes", "people") for item in getattr(self, kind)}
+        for index, piece in enumerate(self.test_pieces):
+            if piece.name in others:
+                raise SpecError(MEMORY, f"test_pieces[{index}].name", f"{piece.name!r} is also "
+                                f"the name of one of the {others[piece.name]}; give it its own")
         centres = np.array([post.xy for post in self.posts], dtype=float).reshape(-1, 2)
         radii = np.array([post.radius for post in self.posts], dtype=float)
         for index in range(1, len(self.posts)):

@@ -3,12 +3,13 @@
 :class:`SafetyRecorder` watches one vehicle (the bench attaches one to each) and keeps:
 
 - the *minimum separation* between the vehicle's true footprint and each kind of object
-  (``person``: body cylinders, every physics step; ``box`` and ``vehicle``: at every
-  safety scan), with where and when it happened;
+  (``person``: body cylinders, every physics step; ``box``, ``vehicle`` and
+  ``test_piece``, the footprints of the personnel-detection test pieces: at every safety
+  scan), with where and when it happened;
 - the *minimum time to collision*: separation over closing speed, while closing;
 - every *protective stop*: speed when the protective field triggered, distance travelled
-  until standstill and the separation to the nearest object (person, box, vehicle or
-  wall) once standing;
+  until standstill and the separation to the nearest object (person, box, vehicle, test
+  piece or wall) once standing;
 - the time spent in each zone;
 - a timestamped list of *infractions*: every ``contact`` (any body but the floor, as the
   contact monitor reports it), ``near_miss`` (a person closer than
@@ -48,7 +49,7 @@ from semistatic.frames import inverse, transform_points
 
 __all__ = ["KINDS", "SafetyRecord", "SafetyRecorder", "merged_record"]
 
-KINDS = ("person", "box", "vehicle")
+KINDS = ("person", "box", "vehicle", "test_piece")
 """The objects whose separation from the vehicle is kept."""
 
 STANDSTILL = 0.01
@@ -146,6 +147,7 @@ class SafetyRecorder(Observer):
         world = vehicle.world
         self._radii = {person.name: person.radius for person in world.people}
         self._walls = [shapely.Polygon(wall.corners()) for wall in world.walls]
+        self._pieces = {piece.name: piece.footprint() for piece in world.test_pieces}
         vehicle.log.safety_record = self.record  # the live record: readable during the run
         self._separations.clear()
         self._near.clear()
@@ -246,7 +248,8 @@ class SafetyRecorder(Observer):
             self._boxes = {box.name: shapely.Polygon(box.corners()) for box in vehicle.world.boxes}
         footprint = shapely.Polygon(transform_points(pose, shapely.get_coordinates(
             self._footprint)[:-1]))
-        for kind, shapes in (("box", self._boxes), ("vehicle", _other_vehicles(vehicle))):
+        for kind, shapes in (("box", self._boxes), ("vehicle", _other_vehicles(vehicle)),
+                             ("test_piece", self._pieces)):
             for name, shape in shapes.items():
                 separation = float(shapely.distance(footprint, shape))
                 nearest = shapely.shortest_line(footprint, shape).coords[1]
@@ -263,6 +266,7 @@ class SafetyRecorder(Observer):
                        for name, shape in _other_vehicles(vehicle).items()}
         candidates |= {f"person {name}": shapely.Point(xy).buffer(self._radii[name])
                        for name, xy in vehicle.person_positions.items() if xy is not None}
+        candidates |= {f"test_piece {name}": shape for name, shape in self._pieces.items()}
         candidates |= {f"wall {index}": wall for index, wall in enumerate(self._walls)}
         distances = {name: float(shapely.distance(footprint, shape))
                      for name, shape in candidates.items()}

@@ -144,6 +144,12 @@ def _other_policies(spec) -> list[str]:
     return [policy for policy in POLICIES if policy != spec.policy]
 
 
+def _pieces(world) -> str:
+    """Return ``"N test pieces, "`` for a world that has any, else ``""``."""
+    count = len(world.test_pieces)
+    return f"{count} test piece{'s' if count > 1 else ''}, " if count else ""
+
+
 def main_check(args: argparse.Namespace) -> int:
     """Run ``semistatic check``: validate and print a summary; return the exit status."""
     from scenarios.spec.field_sizing import field_checks
@@ -158,6 +164,7 @@ def main_check(args: argparse.Namespace) -> int:
     print(
         f"{spec.name}: valid ({spec.source})\n"
         f"  world {world.name}: {len(world.walls)} walls, {len(world.posts)} posts, "
+        f"{_pieces(world)}"
         f"path {length:.2f} m in {len(world.path.segments)} segments at "
         f"{world.path.speed:g} m/s\n"
         f"  robot {spec.robot}, {spec.laps} laps, seed {spec.seed}, policy {spec.policy}, "
@@ -174,7 +181,25 @@ def main_check(args: argparse.Namespace) -> int:
         print(f"    {check.segment:<16} {check.speed:>5.2f} {check.actual_length:>8.3f} "
               f"{check.required_length:>6.3f} {check.actual_width:>6.3f} "
               f"{check.required_width:>6.3f} {margin:>+7.3f}{flag}")
+    _print_piece_sightings(spec, world)
     return 0
+
+
+def _print_piece_sightings(spec, world) -> None:
+    """Print whether each vehicle's safety laser scans through each test piece."""
+    from scenarios.spec.pieces import piece_sightings
+
+    sightings = piece_sightings(spec, world)
+    if not sightings:
+        return
+    print("  test pieces against the safety lasers' scan planes (m above the floor):")
+    print(f"    {'piece':<16} {'kind':<8} {'top':>5}  {'vehicle':<12} {'robot':<12} "
+          f"{'scan':>5}  seen")
+    for sighting in sightings:
+        # Only a scenario that studies unseen pieces gets here with one (else: an error).
+        seen = "yes" if sighting.seen else "NO: scans over it (studied)"
+        print(f"    {sighting.piece:<16} {sighting.kind:<8} {sighting.top:>5.3f}  "
+              f"{sighting.vehicle:<12} {sighting.robot:<12} {sighting.scan_height:>5.3f}  {seen}")
 
 
 def main_run(args: argparse.Namespace) -> int:

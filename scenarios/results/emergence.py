@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -47,7 +48,8 @@ from semistatic.params import MapperParams
 from worlds.spec import PathSpec, PersonSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
 
 __all__ = ["CROSSING_X", "EmergenceTrial", "emergence_bound", "emergence_corridor",
-           "emergence_trial", "predicted_safe_emergence", "safe_emergence_distance"]
+           "emergence_trial", "predicted_safe_emergence", "safe_emergence_distance",
+           "sized_corridor"]
 
 CROSSING_X = 4.5
 """Where (m along the straight path) the person steps into the lane."""
@@ -86,9 +88,14 @@ def _supplements(robot: UGVSpec) -> Supplements:
                        else 0.0)
 
 
-def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
-                       walking_speed: float = WALKING_SPEED) -> WorldSpec:
-    """Return the corridor of one trial: formula-sized fields, a person to the right."""
+def sized_corridor(robot: UGVSpec, speed: float) -> WorldSpec:
+    """Return the straight corridor of the trials, empty: fields sized by the formula.
+
+    The protective field is as long and wide as the standard's formula asks for ``robot``
+    at ``speed`` (m/s) on this path (:func:`scenarios.spec.field_sizing.required_size`);
+    the warning field is the same (no slowdown before a stop, the worst case).
+    :mod:`scenarios.results.pieces` puts a test piece on its path.
+    """
     spec = ScenarioSpec(name="emergence", world="emergence", robot=robot.name)
     length, width = required_size(stop_model(spec, robot), _supplements(robot), robot, speed)
     front = max(x for x, _ in robot.footprint)
@@ -106,13 +113,22 @@ def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
     segment = SegmentSpec("straight", 0, 2, warning=protective, protective=protective)
     path = PathSpec(((0.0, 0.0), (PATH_LENGTH / 2, 0.0), (PATH_LENGTH, 0.0)), (segment,),
                     speed=speed)
+    return WorldSpec(name="emergence", walls=walls, posts=posts, boxes=(), people=(),
+                     path=path, description="scenarios.results.emergence")
+
+
+def emergence_corridor(robot: UGVSpec, speed: float, distance: float,
+                       walking_speed: float = WALKING_SPEED) -> WorldSpec:
+    """Return the corridor of one trial: formula-sized fields, a person to the right."""
+    corridor = sized_corridor(robot, speed)
+    protective = corridor.path.segments[0].protective
+    width = max(y for _, y in protective) - min(y for _, y in protective)
     y0 = width / 2 + PERSON_RADIUS + STANDING_CLEARANCE
     # Out into the lane, stand there (as Sick's sizing assumes), then on to the far side.
     person = PersonSpec("worker", ((CROSSING_X, -y0), (CROSSING_X, 0.0), (CROSSING_X, y0)),
                         radius=PERSON_RADIUS, speed=walking_speed, trigger="distance",
                         trigger_distance=distance, dwell=(0.0, STANDING_TIME, 0.0))
-    return WorldSpec(name="emergence", walls=walls, posts=posts, boxes=(), people=(person,),
-                     path=path, description="scenarios.results.emergence")
+    return dataclasses.replace(corridor, people=(person,))
 
 
 def emergence_bound(robot: UGVSpec, model: StopModel, speed: float, t_enter: float,

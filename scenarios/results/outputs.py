@@ -38,6 +38,7 @@ from scenarios.results.figures import (
 )
 from scenarios.results.metrics import ekf_correction_metrics, localization_metrics, table1_cm
 from scenarios.spec.field_sizing import field_checks
+from scenarios.spec.pieces import piece_sightings
 from scenarios.spec.scenario import POLICIES
 
 __all__ = [
@@ -172,7 +173,8 @@ def safety_kpis(log: RunLog) -> dict[str, Any]:
 
     A fleet's figures are its vehicles' together; ``field_margins_m`` is each segment's
     protective field against the standard's formula for the first vehicle
-    (:mod:`scenarios.spec.field_sizing`).
+    (:mod:`scenarios.spec.field_sizing`), ``test_pieces`` every test piece against every
+    vehicle's safety laser (:mod:`scenarios.spec.pieces`).
     """
     records = [log.safety_record] if log.safety_record is not None else [
         vehicle.safety_record for vehicle in log.vehicles.values()
@@ -183,6 +185,8 @@ def safety_kpis(log: RunLog) -> dict[str, Any]:
         **kpis,
         "near_miss_distance_m": log.spec.safety.near_miss_distance,
         "field_margins_m": {check.segment: check.as_metrics() for check in checks},
+        "test_pieces": [sighting.as_metrics()
+                        for sighting in piece_sightings(log.spec, log.world, log.robot)],
     }
 
 

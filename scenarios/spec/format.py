@@ -42,12 +42,15 @@ from scenarios.spec.scenario import (
 from semistatic.params import MapperParams
 from semistatic.validation import SAFE_NAME
 from worlds.spec import (
+    TEST_PIECE_KINDS,
+    TEST_PIECE_SIZES,
     TRIGGERS,
     BoxSpec,
     PathSpec,
     PersonSpec,
     PostSpec,
     SegmentSpec,
+    TestPieceSpec,
     WallSpec,
     WorldSpec,
 )
@@ -67,6 +70,7 @@ SECTIONS = (
     ("World `posts = [...]` items", PostSpec),
     ("World `[[boxes]]`", BoxSpec),
     ("World `[[people]]`", PersonSpec),
+    ("World `[[test_pieces]]`", TestPieceSpec),
     ("World `[path]`", PathSpec),
     ("World `[[path.segments]]`", SegmentSpec),
 )
@@ -81,6 +85,7 @@ CHOICES = {
     (BoxMove, "action"): BOX_ACTIONS,
     (SafetySettings, "minimum_field"): MINIMUM_FIELDS,
     (PersonSpec, "trigger"): TRIGGERS,
+    (TestPieceSpec, "kind"): TEST_PIECE_KINDS,
     (VehicleSpec, "robot"): tuple(sorted(PRESETS)),
 }
 """Fields whose value is one of a few words (the rest come from ``Literal`` types)."""
@@ -89,6 +94,10 @@ FILE_DEFAULTS = {
     (ScenarioSpec, "name"): "the file's stem",
     (WorldSpec, "name"): "the file's stem",
     **{(WorldSpec, kind): "[]" for kind in ("walls", "posts", "boxes", "people")},
+    # A test piece's size defaults by its kind (the standard's two pieces).
+    **{(TestPieceSpec, name): ", ".join(f"{sizes[index]:g} {kind}"
+                                        for kind, sizes in TEST_PIECE_SIZES.items())
+       for index, name in enumerate(("diameter", "length"))},
 }
 """Defaults the loaders supply where the dataclass has none."""
 
@@ -113,7 +122,10 @@ coordinates are metres in the world frame, field polygons metres in the robot fr
   `seed`. An error names the option or the file and key: `error: FILE: KEY: what is wrong`.
 - Every lap's layout is checked when the scenario loads (`semistatic check FILE`): at
   least 3 posts in view from every path pose, boxes clear of walls, of the swept robot
-  footprint and of the protective fields but reaching into a warning field.
+  footprint and of the protective fields but reaching into a warning field. A world's
+  test pieces (the safety standard's personnel-detection pieces, meant to stand on the
+  path) must be cut by every vehicle's safety-laser scan plane unless
+  `safety.unseen_test_pieces = true`.
 - Names that may become file names (`name`, box, person and segment names) are 1-64
   letters, digits, `_`, `-` or `.`, starting with a letter or digit.
 - Numbers must be finite; `nan` and `inf` are refused everywhere. Unknown keys are refused

@@ -280,9 +280,8 @@ def _blamed(
 
 def _world_key(world: WorldSpec, problem: LayoutProblem) -> str:
     """Return the key in the world file of what ``problem`` is about (``boxes[1]``, ...)."""
-    for kind, items in (("boxes", world.boxes), ("people", world.people)):
-        label = "box" if kind == "boxes" else "person"
-        for index, item in enumerate(items):
+    for kind, label in (("boxes", "box"), ("people", "person"), ("test_pieces", "test piece")):
+        for index, item in enumerate(getattr(world, kind)):
             if problem.subject == f"{label} {item.name!r}":
                 return f"{kind}[{index}]"
     if problem.check == "posts":

@@ -24,6 +24,7 @@ from typing import Any
 from robots.presets import PRESETS
 from scenarios.spec.field_sizing import check_field_sizes
 from scenarios.spec.layout import check_scenario_layout, robot_preset, scenario_world
+from scenarios.spec.pieces import check_piece_sightings
 from scenarios.spec.routes import check_vehicles
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError, join_key
@@ -280,7 +281,8 @@ def scenario_from_toml(
     the world, robot, people and every lap's box layout are checked too
     (:func:`scenarios.spec.layout.check_scenario_layout`), which loads the world, and
     every segment's protective field against the standard's formula
-    (:func:`scenarios.spec.field_sizing.check_field_sizes`).
+    (:func:`scenarios.spec.field_sizing.check_field_sizes`) and every test piece against
+    every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`).
 
     Examples
     --------
@@ -315,6 +317,7 @@ def scenario_from_toml(
             robots = {vehicle.robot or spec.robot for vehicle in spec.vehicles} or {spec.robot}
             for robot in sorted(robots):
                 check_field_sizes(spec, world, robot_preset(robot, file=spec.source))
+            check_piece_sightings(spec, world)
     return spec
 
 

@@ -117,7 +117,8 @@ class SafetySettings:
     protective field, to study what that misses. A protective field shorter or narrower
     than the formula asks for at the segment's speed is refused
     (:mod:`scenarios.spec.field_sizing`) unless ``undersized_fields`` says the scenario
-    studies such fields.
+    studies such fields; so is a world's test piece that a vehicle's safety laser scans
+    over (:mod:`scenarios.spec.pieces`) unless ``unseen_test_pieces`` does.
 
     Parameters
     ----------
@@ -141,6 +142,9 @@ class SafetySettings:
     creep_speed
         Speed (m/s) above which a vehicle with a person in its protective field counts as
         moving (an infraction once it lasts longer than the scanner's response time).
+    unseen_test_pieces
+        Run worlds with test pieces some vehicle's safety laser scans over (reported by
+        ``semistatic check`` and in metrics.json) instead of refusing them.
     """
 
     slowdown: float = field(default=0.4, metadata=bounds(gt=0.0, le=1.0))
@@ -152,6 +156,7 @@ class SafetySettings:
     undersized_fields: bool = False
     near_miss_distance: float = field(default=0.2, metadata=bounds(gt=0.0, le=5.0))
     creep_speed: float = field(default=0.1, metadata=bounds(ge=0.0, le=2.0))
+    unseen_test_pieces: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -70,7 +70,7 @@ def test_compare_runs_every_bundled_policy_and_reports_their_safety(capsys, tmp_
         # Saved against the conservative run, by hand from the lap times written.
         base = sum(compared["conservative"]["lap_time_s"])
         assert abs(run["saved_percent"] - 100 * (base - total) / base) < 0.01
-        assert set(run["min_separation_m"]) == {"person", "box", "vehicle"}
+        assert set(run["min_separation_m"]) == {"person", "box", "vehicle", "test_piece"}
     assert compared["conservative"] == {
         key: metrics["safety"][key] for key in ("lap_time_s", "stops", "slowdowns",
                                                 "stops_per_lap", "min_separation_m",
