@@ -345,10 +345,11 @@ class PackedPolylines(list):
         >>> taken.points.tolist(), taken.offsets.tolist(), taken[1] is lines[0]
         ([[3.0, 1.0], [2.0, 0.0], [0.0, 0.0], [1.0, 0.0]], [0, 2, 4], True)
         """
-        picks = np.asarray(indices, dtype=np.int64).reshape(-1)
+        # C-contiguous, the one layout the kernel is compiled for (np.nonzero's are not).
+        picks = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1)
         flips = (
             np.zeros(picks.size, np.bool_) if reverse is None
-            else np.asarray(reverse, dtype=np.bool_).reshape(-1)
+            else np.ascontiguousarray(reverse, dtype=np.bool_).reshape(-1)
         )
         positions, count = picks.tolist(), len(self)
         if flips.size != picks.size or (positions and not (

@@ -311,7 +311,8 @@ def visibility(
         scan.angle_increment, scan.range_min, limit, margin, params.epsilon, params.gate,
         cut,
     )
-    for k in np.flatnonzero(lines.offsets[1:] - lines.offsets[:-1] < 2).tolist():
+    sizes = (lines.offsets[1:] - lines.offsets[:-1]).tolist()
+    for k in [k for k, size in enumerate(sizes) if size < 2]:
         counts[k] = _point_counts(lines[k], scan, pose, limit, margin)
     pieces, stored = [], 0
     spans = spans.tolist()
