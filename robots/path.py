@@ -28,6 +28,7 @@ array([ 0.   ,  0.   , -0.137])
 from __future__ import annotations
 
 import itertools
+import math
 
 import numba
 import numpy as np
@@ -376,13 +377,18 @@ class SplinePath:
             # min/max on a float clip like numpy.clip (nan stays nan) at a tenth of the cost.
             centre = min(max(float(s_hint), 0.0), self.length)
             lo, hi = max(0.0, centre - window), min(self.length, centre + window)
-        points = points.reshape(-1, 2)
-        if not np.all(np.isfinite(points)):
+        # Coordinate columns as the kernel takes them; for one point (the follower's, at
+        # 50 Hz) from two Python floats, numpy's per-call cost being most of the query.
+        if single and points.shape == (2,):
+            x, y = points.tolist()
+            xs, ys, finite = np.array([x]), np.array([y]), math.isfinite(x) and math.isfinite(y)
+        else:
+            points = points.reshape(-1, 2)
+            xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+            finite = bool(np.isfinite(points).all())
+        if not finite:
             raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
-        s = _project_points(
-            np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
-            float(lo), float(hi), *self._projection_tables,
-        )
+        s = _project_points(xs, ys, float(lo), float(hi), *self._projection_tables)
         return float(s[0]) if single else s
 
 
