@@ -76,6 +76,7 @@ def warm_up() -> float:
     ekf.initialize([0.0, 0.0, 0.0], np.diag([0.01, 0.01, 0.001]), stamp=0.0)
     ekf.update([LandmarkObservation(4.0, 0.0, np.diag([1e-4, 1e-6]), [0])], stamp=0.1)
     path.project((1.0, 0.1), s_hint=0.9, window=1.0)  # the follower's projection
+    path.frame(0.9)  # and its reference
     return time.perf_counter() - start
 
 

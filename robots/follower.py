@@ -228,7 +228,7 @@ class ChainedFormFollower:
         [0.02, 0.199, 0.1]
         """
         x, y, theta = np.asarray(pose, dtype=float)[:3].tolist()
-        x_ref, y_ref, theta_ref = self.path.pose(self._project(x, y)).tolist()
+        x_ref, y_ref, theta_ref, _ = self.path.frame(self._project(x, y))
         return _offset(x, y, theta, x_ref, y_ref, theta_ref)
 
     def _project(self, x: float, y: float) -> float:
@@ -283,8 +283,8 @@ class ChainedFormFollower:
             # Brake profile: never faster than the speed from which the robot can still
             # stop at the path end with max_deceleration. A closed path has no end.
             u1r = min(u1r, math.sqrt(2.0 * params.max_deceleration * remaining))
-        x_ref, y_ref, theta_ref = self.path.pose(self.progress).tolist()
-        u2r = self.path.curvature(self.progress) * u1r
+        x_ref, y_ref, theta_ref, curvature = self.path.frame(self.progress)
+        u2r = curvature * u1r
         xe, ye, theta_e = _offset(x, y, theta, x_ref, y_ref, theta_ref)
         theta_e = min(max(theta_e, -MAX_HEADING_ERROR), MAX_HEADING_ERROR)
         v = u1r - params.k1 * abs(u1r) * xe

@@ -28,6 +28,7 @@ array([ 0.   ,  0.   , -0.137])
 from __future__ import annotations
 
 import itertools
+import math
 
 import numba
 import numpy as np
@@ -230,8 +231,8 @@ class SplinePath:
         >>> round(SplinePath([(0.0, 0.0), (0.0, 3.0)]).heading(1.0), 4)
         1.5708
         """
-        velocity = self._evaluate(self._t(s))[1]
-        heading = np.arctan2(velocity[..., 1], velocity[..., 0])
+        _, velocity, _ = self._evaluate(self._t(s))
+        heading = _heading(velocity[..., 0], velocity[..., 1])
         return float(heading) if heading.ndim == 0 else heading
 
     def curvature(self, s: ArrayLike) -> np.ndarray | float:
@@ -244,8 +245,7 @@ class SplinePath:
         2.0
         """
         _, d1, d2 = self._evaluate(self._t(s))
-        cross = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
-        curvature = cross / np.hypot(d1[..., 0], d1[..., 1]) ** 3
+        curvature = _curvature(d1[..., 0], d1[..., 1], d2[..., 0], d2[..., 1])
         return float(curvature) if curvature.ndim == 0 else curvature
 
     def pose(self, s: ArrayLike) -> np.ndarray:
@@ -257,8 +257,25 @@ class SplinePath:
         array([0.5, 0. , 0. ])
         """
         point, velocity, _ = self._evaluate(self._t(s))
-        heading = np.arctan2(velocity[..., 1], velocity[..., 0])
+        heading = _heading(velocity[..., 0], velocity[..., 1])
         return np.concatenate([point, heading[..., None]], axis=-1)
+
+    def frame(self, s: float) -> tuple[float, float, float, float]:
+        """Return ``(x, y, heading, curvature)`` at one arc length ``s``, as floats.
+
+        The values of :meth:`pose` and :meth:`curvature` at ``s`` to the last bit, from one
+        compiled evaluation: the follower asks for them at 50 Hz, where numpy's per-call
+        overhead on one-element arrays would cost more than the arithmetic.
+
+        Examples
+        --------
+        >>> parabola = SplinePath([(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)], bc_type="not-a-knot")
+        >>> x, y, heading, curvature = parabola.frame(parabola.length / 2)
+        >>> round(x, 6) + 0.0, round(y, 6), round(heading, 4), round(curvature, 2)
+        (0.0, 1.0, 3.1416, 2.0)
+        """
+        x, y, dx, dy, ddx, ddy = _frame_at(*self._s_to_t, *self._xy, self.length, float(s))
+        return x, y, float(_heading(dx, dy)), float(_curvature(dx, dy, ddx, ddy))
 
     def reference(
         self, s: ArrayLike, speed: float
@@ -360,13 +377,18 @@ class SplinePath:
             # min/max on a float clip like numpy.clip (nan stays nan) at a tenth of the cost.
             centre = min(max(float(s_hint), 0.0), self.length)
             lo, hi = max(0.0, centre - window), min(self.length, centre + window)
-        points = points.reshape(-1, 2)
-        if not np.all(np.isfinite(points)):
+        # Coordinate columns as the kernel takes them; for one point (the follower's, at
+        # 50 Hz) from two Python floats, numpy's per-call cost being most of the query.
+        if single and points.shape == (2,):
+            x, y = points.tolist()
+            xs, ys, finite = np.array([x]), np.array([y]), math.isfinite(x) and math.isfinite(y)
+        else:
+            points = points.reshape(-1, 2)
+            xs, ys = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+            finite = bool(np.isfinite(points).all())
+        if not finite:
             raise ValueError("SplinePath.project: xy must be finite (got nan or inf)")
-        s = _project_points(
-            np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1]),
-            float(lo), float(hi), *self._projection_tables,
-        )
+        s = _project_points(xs, ys, float(lo), float(hi), *self._projection_tables)
         return float(s[0]) if single else s
 
 
@@ -384,6 +406,19 @@ def _evaluate_cubic(
     value, first, second = _cubic_rows(breaks, coefficients, np.ascontiguousarray(x.ravel()))
     shape = (*x.shape, coefficients.shape[2])
     return value.reshape(shape), first.reshape(shape), second.reshape(shape)
+
+
+def _heading(dx: ArrayLike, dy: ArrayLike) -> np.ndarray:
+    """Return the direction of the tangent ``(dx, dy)`` in radians (arrays or floats)."""
+    return np.arctan2(dy, dx)
+
+
+def _curvature(dx: ArrayLike, dy: ArrayLike, ddx: ArrayLike, ddy: ArrayLike) -> np.ndarray:
+    """Return the signed curvature from the first and second derivatives (arrays or floats).
+
+    numpy's hypot and power for floats too: math's round differently in the last bit.
+    """
+    return (dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3
 
 
 def _cubic_table(cubic) -> tuple[np.ndarray, np.ndarray]:
@@ -470,6 +505,27 @@ def _cubic_rows(breaks, coefficients, x):  # pragma: no cover - compiled
             value[i, column], first[i, column], second[i, column] = _cubic_at(
                 breaks, coefficients, x[i], column)
     return value, first, second
+
+
+@numba.njit(cache=True)
+def _frame_at(
+    s_to_t_breaks, s_to_t_coefficients, breaks, coefficients, length, s
+):  # pragma: no cover - compiled
+    """Return ``(x, y, x', y', x'', y'')`` of the path at one arc length ``s``.
+
+    ``s`` clamped to ``[0, length]`` as :meth:`SplinePath._t` clamps it, then ``t(s)`` and
+    ``r(t)`` by :func:`_cubic_at`: the same evaluation as a table query, for one ``s``.
+
+    Examples
+    --------
+    >>> path = SplinePath([(0.0, 0.0), (2.0, 0.0)])
+    >>> [round(v, 6) + 0.0 for v in _frame_at(*path._s_to_t, *path._xy, path.length, 0.5)]
+    [0.5, 0.0, 1.0, 0.0, 0.0, 0.0]
+    """
+    t = _cubic_at(s_to_t_breaks, s_to_t_coefficients, min(max(s, 0.0), length), _COLUMN0)[0]
+    x, dx, ddx = _cubic_at(breaks, coefficients, t, _COLUMN0)
+    y, dy, ddy = _cubic_at(breaks, coefficients, t, _COLUMN1)
+    return x, y, dx, dy, ddx, ddy
 
 
 @numba.njit(cache=True)

@@ -584,23 +584,21 @@ def associate(
     if rows.size == 0:
         return ValidatedPairs()
     # The map polylines as the kernels see them: in counter-clockwise order and direction.
-    rows, order, reversed_ = rows.tolist(), order.tolist(), reversed_.tolist()
-    oriented = [
-        maps[j].reversed() if flip else maps[j] for j, flip in zip(order, reversed_, strict=True)
-    ]
     pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
     if not forced:
-        candidates = [scans[i] for i in rows]
-        costs = _similarity_costs(feasible, candidates, oriented)
+        costs = _similarity_costs(feasible, scans.take(rows), maps.take(order, reversed_))
         path = np.array(optimal_path(costs), dtype=np.int64).reshape(-1, 2)
         pairs = _gateable(path, feasible, scan_bounds, map_bounds)
-    a, b = pairs[:, 0].tolist(), pairs[:, 1].tolist()
-    # Stops early above the gate: the value is then only a lower bound, but one that
-    # fails the gate exactly when the full distance does.
+    # The pairs' polylines, the map's run the scan's way. Stops early above the gate: the
+    # value is then only a lower bound, but one that fails the gate exactly when the full
+    # distance does.
+    columns = pairs[:, 1]
     distances = restricted_hausdorff(
-        PackedPolylines([scans[rows[k]] for k in a]), PackedPolylines([oriented[k] for k in b]),
-        mode, limit=float(gate),
+        scans.take(rows[pairs[:, 0]]), maps.take(order[columns], reversed_[columns]), mode,
+        limit=float(gate),
     ).tolist()
+    rows, order = rows.tolist(), order.tolist()
+    a, b = pairs[:, 0].tolist(), pairs[:, 1].tolist()
     kept = [k for k, distance in enumerate(distances) if distance <= gate]
     return ValidatedPairs(
         [(rows[a[k]], order[b[k]]) for k in kept], [distances[k] for k in kept]
@@ -608,7 +606,7 @@ def associate(
 
 
 def _similarity_costs(
-    feasible: np.ndarray, scans: list[Polyline], maps: list[Polyline]
+    feasible: np.ndarray, scans: PackedPolylines, maps: PackedPolylines
 ) -> np.ndarray:
     """Return the recursion's costs: :func:`similarity` of each feasible pair, else ``FAR_COST``.
 
@@ -617,7 +615,6 @@ def _similarity_costs(
     """
     a, b = np.nonzero(feasible)
     costs = np.full(feasible.shape, FAR_COST)
-    values = similarity(PackedPolylines([scans[k] for k in a.tolist()]),
-                        PackedPolylines([maps[k] for k in b.tolist()]))
+    values = similarity(scans.take(a), maps.take(b))
     costs[a, b] = np.where(values < FAR_COST, values, FAR_COST)
     return costs

@@ -538,7 +538,8 @@ class PolylineMap:
         # (Polylines compare by identity: the same objects under the same ids.)
         if cached is not None and cached.ids == ids and cached.lines == lines:
             return cached
-        self._geometry_cache = _Geometry(ids, PackedPolylines(lines))
+        positions = {map_id: k for k, map_id in enumerate(ids)}
+        self._geometry_cache = _Geometry(ids, PackedPolylines(lines), positions)
         return self._geometry_cache
 
     def _cut_observed(
@@ -553,7 +554,7 @@ class PolylineMap:
         update cut, inserted or joined anything. Nothing until then changes them (the merge,
         the cut and the join exclude them): the one pass over the beams serves both.
         """
-        ids, lines = self._geometry()
+        ids, lines, _ = self._geometry()
         seen = visibility(lines, scan, pose, self.params)
         others = {
             map_id: (missing, pieces)
@@ -637,8 +638,10 @@ class PolylineMap:
             return set()
         epsilon = self.params.epsilon
         entries = [self._entries[map_id] for map_id in by_map]
+        # The association's packed map (nothing changed it since): taken, not packed again.
+        geometry = self._geometry()
         merged = merge(
-            [entry.polyline for entry in entries],
+            geometry.lines.take([geometry.positions[map_id] for map_id in by_map]),
             [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
             epsilon,
             edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
@@ -729,7 +732,7 @@ class PolylineMap:
     def _join(self, changed: set[int], inserted: set[int]) -> list[tuple[int, int]]:
         if not changed or len(self._entries) < 2:
             return []
-        ids, lines = self._geometry()
+        ids, lines, _ = self._geometry()
         groups = overlapping_groups(
             lines,
             np.array([map_id in changed for map_id in ids], dtype=bool),
@@ -796,10 +799,11 @@ class _Entries(dict):
 
 
 class _Geometry(NamedTuple):
-    """The map's ids and polylines in map order (packed, with their boxes)."""
+    """The map's ids and polylines in map order (packed, with their boxes), and where each is."""
 
     ids: list[int]
     lines: PackedPolylines
+    positions: dict[int, int]
 
 
 def _associations(pairs: ValidatedPairs, ids: list[int]) -> tuple[Association, ...]:

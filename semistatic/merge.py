@@ -365,8 +365,8 @@ def merge(
             f"merge: need one observation per map polyline, got {len(lines)} polylines and "
             f"{len(observations)} observations"
         )
-    edge_counts = np.maximum(np.diff(lines.offsets) - 1, 0)
-    weight_offsets = run_offsets(edge_counts.tolist(), len(lines))
+    sizes = lines.offsets[1:] - lines.offsets[:-1]
+    weight_offsets = run_offsets(np.maximum(sizes - 1, 0).tolist(), len(lines))
     weights = _checked_weights("edge_weights", edge_weights, int(weight_offsets[-1]),
                                "edge of the map polylines")
     point_weights = _checked_weights("end_weights", end_weights, len(lines), "map polyline")

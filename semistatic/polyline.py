@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -253,10 +253,11 @@ class PackedPolylines(list):
     TypeError: PackedPolylines is read-only: build a new one from the polylines wanted
     """
 
-    __slots__ = ("_boxes", "_scan_indices", "offsets", "points")
+    __slots__ = ("_boxes", "_recipe", "_scan_indices", "offsets", "points")
 
     def __init__(self, polylines: Iterable[Polyline | ArrayLike] = ()) -> None:
-        lines = [as_polyline(line) for line in polylines]
+        # (The type test inline: most sets are made of polylines, several per scan.)
+        lines = [line if type(line) is Polyline else as_polyline(line) for line in polylines]
         list.extend(self, lines)
         vertices = [line.points for line in lines]
         # (len is the row count: a map over arrays costs no generator frame per polyline.)
@@ -264,6 +265,7 @@ class PackedPolylines(list):
         self.points = np.concatenate(vertices) if vertices else np.empty((0, 2))
         self._boxes: np.ndarray | None = None
         self._scan_indices: np.ndarray | None = None
+        self._recipe: tuple | None = None
 
     @classmethod
     def from_runs(
@@ -300,7 +302,10 @@ class PackedPolylines(list):
         bounds = offsets.tolist()
         if not (
             points.ndim == 2 and points.shape[1] == 2 and offsets.ndim == 1 and bounds
-            and bounds[0] == 0 and bounds[-1] == points.shape[0] and np.isfinite(points).all()
+            and bounds[0] == 0 and bounds[-1] == points.shape[0]
+            # A nan or inf anywhere makes the sum nan or inf; finite metres cannot overflow.
+            # (The ufunc's own reduce: a scan's sets are checked several times per update.)
+            and math.isfinite(np.add.reduce(points, axis=None))
         ):
             raise ValueError(
                 "PackedPolylines.from_runs: need finite (N, 2) points and offsets from 0 to "
@@ -313,27 +318,49 @@ class PackedPolylines(list):
                     f"PackedPolylines.from_runs: scan_indices has shape {scan_indices.shape}, "
                     f"points {points.shape[0]} rows; pass one scan index per vertex"
                 )
-        frozen = points.copy()
-        frozen.flags.writeable = False
-        new = object.__new__
-        lines = []
-        for start, stop in itertools.pairwise(bounds):
-            if stop < start:
-                raise ValueError(f"PackedPolylines.from_runs: offsets decrease: {bounds}")
-            # Polyline._view written out: once per polyline of every scan.
-            line = new(Polyline)
-            state = line.__dict__
-            state["points"] = frozen[start:stop]
-            state["scan_indices"] = (
-                _vertex_order(stop - start) if scan_indices is None
-                else scan_indices[start:stop]
+        if bounds != sorted(bounds):
+            raise ValueError(f"PackedPolylines.from_runs: offsets decrease: {bounds}")
+        return _Unmade.of(points, offsets, scan_indices, ("runs", bounds))
+
+    def take(self, indices: ArrayLike, reverse: ArrayLike | None = None) -> PackedPolylines:
+        """Return the polylines ``indices``, in that order, each reversed where ``reverse`` is.
+
+        As ``PackedPolylines([self[k] for k in indices])`` (reversed ones as
+        :meth:`Polyline.reversed`), with the vertices gathered from :attr:`points` in one
+        compiled pass instead of packed again polyline by polyline: the association takes
+        its candidates and its pairs so, several times per scan.
+
+        Parameters
+        ----------
+        indices
+            ``(K,)`` positions in this set (repeats allowed).
+        reverse
+            ``(K,)`` booleans: which of the taken polylines run backwards. Default: none.
+
+        Examples
+        --------
+        >>> lines = PackedPolylines([[[0.0, 0.0], [1.0, 0.0]], [[5.0, 5.0]],
+        ...                          [[2.0, 0.0], [3.0, 1.0]]])
+        >>> taken = lines.take([2, 0], reverse=[True, False])
+        >>> taken.points.tolist(), taken.offsets.tolist(), taken[1] is lines[0]
+        ([[3.0, 1.0], [2.0, 0.0], [0.0, 0.0], [1.0, 0.0]], [0, 2, 4], True)
+        """
+        # C-contiguous, the one layout the kernel is compiled for (np.nonzero's are not).
+        picks = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1)
+        flips = (
+            np.zeros(picks.size, np.bool_) if reverse is None
+            else np.ascontiguousarray(reverse, dtype=np.bool_).reshape(-1)
+        )
+        positions, count = picks.tolist(), len(self)
+        if flips.size != picks.size or (positions and not (
+            min(positions) >= 0 and max(positions) < count
+        )):
+            raise IndexError(
+                f"PackedPolylines.take: need indices in [0, {count}) and one reverse flag "
+                f"each, got {picks.size} indices and {flips.size} flags"
             )
-            lines.append(line)
-        packed = cls.__new__(cls)
-        list.extend(packed, lines)
-        packed.points, packed.offsets = points, offsets
-        packed._boxes, packed._scan_indices = None, scan_indices
-        return packed
+        points, offsets = _take_runs(self.points, self.offsets, picks, flips)
+        return _Unmade.of(points, offsets, None, ("take", self, positions, flips.tolist()))
 
     @property
     def boxes(self) -> np.ndarray:
@@ -371,7 +398,9 @@ class PackedPolylines(list):
 
     def __eq__(self, other: object) -> bool:
         # Equal to a tuple of the same polylines too: what a report held before packing.
-        return list.__eq__(self, list(other) if isinstance(other, tuple) else other)
+        return list.__eq__(
+            self, list(other) if isinstance(other, tuple | PackedPolylines) else other
+        )
 
     def __ne__(self, other: object) -> bool:
         equal = self.__eq__(other)
@@ -394,6 +423,106 @@ class PackedPolylines(list):
 
     append = extend = insert = remove = pop = clear = sort = reverse = _refuse
     __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
+
+
+class _Unmade(PackedPolylines):
+    """A :class:`PackedPolylines` whose :class:`Polyline` objects are not made yet.
+
+    What :meth:`PackedPolylines.from_runs` and :meth:`PackedPolylines.take` return: the
+    kernels read only :attr:`~PackedPolylines.points` and
+    :attr:`~PackedPolylines.offsets`, and many sets (the association's candidates and
+    pairs) are never looked into, so making a Python object per polyline up front would be
+    most of their cost. The first look at an element makes them all and turns the set into
+    a plain ``PackedPolylines`` (this very object, its class swapped): from then on it is
+    indexed and iterated at list speed. The list methods that read the storage are
+    overridden here so that they make it first.
+
+    ``_recipe`` says how: ``("runs", bounds)``, views of runs of a read-only copy of the
+    points (scan indices from ``_scan_indices`` or the vertex order), or ``("take", source,
+    positions, flips)``, the source set's polylines, reversed where flipped.
+    """
+
+    __slots__ = ()
+
+    @classmethod
+    def of(
+        cls, points: np.ndarray, offsets: np.ndarray, scan_indices: np.ndarray | None,
+        recipe: tuple,
+    ) -> _Unmade:
+        unmade = cls.__new__(cls)
+        unmade.points, unmade.offsets = points, offsets
+        unmade._boxes, unmade._scan_indices, unmade._recipe = None, scan_indices, recipe
+        return unmade
+
+    def _made(self) -> PackedPolylines:
+        """Make the polylines, become a plain :class:`PackedPolylines` and return self."""
+        recipe = self._recipe
+        if recipe[0] == "take":
+            _, source, positions, flips = recipe
+            lines = [
+                line.reversed() if flip else line
+                for line, flip in zip(map(source.__getitem__, positions), flips, strict=True)
+            ]
+        else:
+            frozen = self.points.copy()
+            frozen.flags.writeable = False
+            indices = self._scan_indices
+            new = object.__new__
+            lines = []
+            for start, stop in itertools.pairwise(recipe[1]):
+                # Polyline._view written out: once per polyline of every scan.
+                line = new(Polyline)
+                state = line.__dict__
+                state["points"] = frozen[start:stop]
+                state["scan_indices"] = (
+                    _vertex_order(stop - start) if indices is None else indices[start:stop]
+                )
+                lines.append(line)
+        list.extend(self, lines)
+        self._recipe = None
+        self.__class__ = PackedPolylines
+        return self
+
+    def __len__(self) -> int:
+        return self.offsets.shape[0] - 1
+
+    def __getitem__(self, index):
+        return self._made()[index]
+
+    def __iter__(self) -> Iterator[Polyline]:
+        return iter(self._made())
+
+    def __reversed__(self) -> Iterator[Polyline]:
+        return reversed(self._made())
+
+    def __contains__(self, item: object) -> bool:
+        return item in self._made()
+
+    def __eq__(self, other: object) -> bool:
+        return self._made() == other
+
+    def __ne__(self, other: object) -> bool:
+        return self._made() != other
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return repr(self._made())
+
+    def __add__(self, other: object) -> list:
+        return self._made() + other
+
+    def __mul__(self, times: int) -> list:
+        return self._made() * times
+
+    def index(self, *args: object) -> int:
+        return self._made().index(*args)
+
+    def count(self, item: object) -> int:
+        return self._made().count(item)
+
+    def copy(self) -> list:
+        return self._made().copy()
 
 
 def as_polylines(obj: PackedPolylines | Iterable[Polyline | ArrayLike]) -> PackedPolylines:
@@ -439,6 +568,23 @@ def _vertex_order(count: int) -> np.ndarray:
         indices = _VERTEX_ORDER[count] = np.arange(count, dtype=np.int64)
         indices.flags.writeable = False
     return indices
+
+
+@numba.njit(cache=True)
+def _take_runs(points, offsets, picks, flips):  # pragma: no cover - compiled
+    """Return the runs ``picks`` of packed ``points`` (reversed where ``flips``) and offsets."""
+    taken_offsets = np.zeros(picks.size + 1, np.int64)
+    for k in range(picks.size):
+        taken_offsets[k + 1] = taken_offsets[k] + offsets[picks[k] + 1] - offsets[picks[k]]
+    taken = np.empty((taken_offsets[picks.size], 2))
+    for k in range(picks.size):
+        start, stop = offsets[picks[k]], offsets[picks[k] + 1]
+        base = taken_offsets[k]
+        for v in range(stop - start):
+            source = stop - 1 - v if flips[k] else start + v
+            taken[base + v, 0] = points[source, 0]
+            taken[base + v, 1] = points[source, 1]
+    return taken, taken_offsets
 
 
 @numba.njit(cache=True)

@@ -220,9 +220,16 @@ class Visibility:
         ...            [None] * 3, min_points=2).missing  # there, gone, hidden behind
         array([False,  True, False])
         """
-        needed = np.maximum(self.min_points, np.ceil(MIN_VISIBLE_FRACTION * self.in_view))
-        visible = (self.unoccluded > 0) & (self.unoccluded >= needed)
-        return visible & (self.seen_through >= MISSING_FRACTION * self.unoccluded)
+        # Over Python ints: a map's few dozen polylines cost less so than numpy's calls.
+        return np.array([
+            unoccluded > 0
+            and unoccluded >= max(self.min_points, math.ceil(MIN_VISIBLE_FRACTION * in_view))
+            and seen_through >= MISSING_FRACTION * unoccluded
+            for in_view, unoccluded, seen_through in zip(
+                self.in_view.tolist(), self.unoccluded.tolist(), self.seen_through.tolist(),
+                strict=True,
+            )
+        ], dtype=bool)
 
 
 def visibility(
@@ -304,7 +311,8 @@ def visibility(
         scan.angle_increment, scan.range_min, limit, margin, params.epsilon, params.gate,
         cut,
     )
-    for k in np.flatnonzero(np.diff(lines.offsets) < 2).tolist():
+    sizes = (lines.offsets[1:] - lines.offsets[:-1]).tolist()
+    for k in [k for k, size in enumerate(sizes) if size < 2]:
         counts[k] = _point_counts(lines[k], scan, pose, limit, margin)
     pieces, stored = [], 0
     spans = spans.tolist()

@@ -317,6 +317,13 @@ def test_queries_match_scipy_by_arc_length(name):
     assert isinstance(path.heading(1.0), float)
     assert isinstance(path.curvature(1.0), float)
     assert path.pose(3).shape == path.pose(np.array(3.0)).shape == (3,)  # ints too
+    # frame(s), the follower's query: scipy's values, and pose's and curvature's to the bit.
+    framed = np.array([path.frame(s) for s in s_values.tolist()])
+    np.testing.assert_allclose(framed[:, :2], expected["point"], rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(framed[:, 2], expected["heading"], rtol=0.0, atol=1e-5)
+    np.testing.assert_allclose(framed[:, 3], expected["curvature"], rtol=0.0, atol=1e-4)
+    np.testing.assert_array_equal(framed[:, :3], path.pose(s_values))
+    np.testing.assert_array_equal(framed[:, 3], path.curvature(s_values))
 
 
 def poses_near(path: SplinePath, rng: np.random.Generator, count: int, spread: float):

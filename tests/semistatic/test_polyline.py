@@ -154,3 +154,76 @@ def test_packed_polylines_are_read_only_compare_as_sequences_and_pickle():
     assert len(copy) == 2
     np.testing.assert_array_equal(copy.points, lines.points)
     np.testing.assert_array_equal(copy.offsets, lines.offsets)
+
+
+def _made_by_hand(lines, indices, flips):
+    """The polylines ``take`` must give: picked one by one, reversed ones by reversing rows."""
+    return [
+        (lines[k].points[::-1], lines[k].scan_indices[::-1]) if flip
+        else (lines[k].points, lines[k].scan_indices)
+        for k, flip in zip(indices, flips, strict=True)
+    ]
+
+
+def test_take_gathers_runs_in_order_reversing_the_flagged_ones():
+    lines = PackedPolylines([
+        Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], [4, 5, 6]),
+        Polyline([[5.0, 5.0]], [9]),
+        Polyline([[2.0, 0.0], [3.0, 1.0]], [1, 2]),
+    ])
+    indices, flips = [2, 0, 0, 1], [True, False, True, False]
+    taken = lines.take(indices, reverse=flips)
+    expected = _made_by_hand(lines, indices, flips)
+    np.testing.assert_array_equal(taken.points, np.concatenate([p for p, _ in expected]))
+    np.testing.assert_array_equal(taken.offsets, [0, 2, 5, 8, 9])
+    assert len(taken) == 4
+    for line, (points, indices_expected) in zip(taken, expected, strict=True):
+        np.testing.assert_array_equal(line.points, points)
+        np.testing.assert_array_equal(line.scan_indices, indices_expected)
+    assert taken[1] is lines[0]  # not reversed: the very polyline
+    np.testing.assert_array_equal(taken.scan_indices, [2, 1, 4, 5, 6, 6, 5, 4, 9])
+    assert len(lines.take([])) == 0
+    with pytest.raises(IndexError, match="indices in"):
+        lines.take([3])
+    with pytest.raises(IndexError, match="one reverse flag"):
+        lines.take([0, 1], reverse=[True])
+
+
+@pytest.mark.parametrize("make", ["from_runs", "take"])
+def test_sets_whose_polylines_are_made_late_behave_as_lists_of_them(make):
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0], [4.0, 2.0]])
+    if make == "from_runs":
+        def fresh():
+            return PackedPolylines.from_runs(points.copy(), [0, 2, 5])
+    else:
+        source = PackedPolylines([points[:2], points[2:]])
+
+        def fresh():
+            return source.take([0, 1])
+    reference = list(fresh())  # what a look at the elements makes
+    assert len(fresh()) == 2  # no element needed
+    assert fresh()
+    checks = [
+        lambda s: [line.points.tolist() for line in s]
+        == [line.points.tolist() for line in reference],
+        lambda s: s[1].points.tolist() == points[2:].tolist(),
+        lambda s: s[-1].points.tolist() == points[2:].tolist(),
+        lambda s: [line.points.tolist() for line in s[0:1]] == [points[:2].tolist()],
+        lambda s: [line.points.tolist() for line in reversed(s)]
+        == [points[2:].tolist(), points[:2].tolist()],
+        lambda s: s == list(s) and list(s) == s and s == tuple(s) and tuple(s) == s,
+        lambda s: s[0] in s and s.index(s[1]) == 1 and s.count(s[0]) == 1,
+        lambda s: len(s + [None]) == 3 and len(s * 2) == 4,  # noqa: RUF005 - list's + on the set
+        lambda s: len([None, *s]) == 3,
+        lambda s: repr(s).startswith("[Polyline(2 vertices"),
+        lambda s: len(pickle.loads(pickle.dumps(s))) == 2,
+        lambda s: s.copy() == list(s),
+    ]
+    for check in checks:
+        packed = fresh()  # each check is the first look at a fresh set
+        assert isinstance(packed, PackedPolylines)
+        assert check(packed)
+        assert type(packed) is PackedPolylines  # looked into, it is a plain set from then on
+    untouched = fresh()
+    np.testing.assert_array_equal(untouched.points, points)  # kernels read it as it is
+    np.testing.assert_array_equal(untouched.boxes, [[0.0, 0.0, 1.0, 0.0], [2.0, 2.0, 4.0, 2.0]])
