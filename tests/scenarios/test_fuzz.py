@@ -110,7 +110,9 @@ def mutants(draw) -> tuple[str, dict, dict]:
             other = draw(st.sampled_from(places))
             parent[key] = copy.deepcopy(_container(target, other)[other[-1]])
         elif action == "retype":
-            parent[key] = draw(st.sampled_from(OTHER_TYPES))
+            # A copy: a later mutation may change it in place, and the module's own lists
+            # and tables must stay as they are for the next example.
+            parent[key] = copy.deepcopy(draw(st.sampled_from(OTHER_TYPES)))
         elif action == "number":
             parent[key] = draw(st.sampled_from(EXTREMES) | st.floats() | st.integers())
         else:
