@@ -22,12 +22,12 @@ CLOSED_LOOP_DOCTESTS = {
 }
 
 
-@pytest.fixture(scope="session", autouse=True)
-def compiled_kernels():
+def pytest_configure(config: pytest.Config) -> None:
     """Compile the mapper's kernels ahead of the tests, on every core, once per session.
 
     A library call never compiles ahead (``Testbench.reset`` starts no process); the
-    command line and this suite ask for it.
+    command line and this suite ask for it. Under pytest-xdist (``make test``) the
+    controller compiles before it starts the workers, which then load them from the cache.
     """
     warm_kernel_cache()
 

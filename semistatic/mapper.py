@@ -631,25 +631,28 @@ class PolylineMap:
         associated: tuple[Association, ...],
         stamp: float,
     ) -> set[int]:
-        by_map: dict[int, list[int]] = {}
-        for pair in associated:
-            by_map.setdefault(pair.map_id, []).append(pair.scan_index)
-        if not by_map:
+        if not associated:
             return set()
+        # The association's packed map (nothing changed it since): taken, not packed again,
+        # in map order (often the whole map, in its order: then it is the map's set itself).
+        geometry = self._geometry()
+        by_map: dict[int, list[int]] = {}
+        for pair in sorted(associated, key=lambda pair: geometry.positions[pair.map_id]):
+            by_map.setdefault(pair.map_id, []).append(pair.scan_index)
         epsilon = self.params.epsilon
         entries = [self._entries[map_id] for map_id in by_map]
-        # The association's packed map (nothing changed it since): taken, not packed again.
-        geometry = self._geometry()
+        groups = list(by_map.values())
         merged = merge(
             geometry.lines.take([geometry.positions[map_id] for map_id in by_map]),
-            [[observed[index] for index in scan_indices] for scan_indices in by_map.values()],
+            observed.take([index for scan_indices in groups for index in scan_indices]),
             epsilon,
+            counts=list(map(len, groups)),
             edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
             end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )
-        for entry, (line, support) in zip(entries, merged, strict=True):
-            self._entries[entry.id] = _replaced(
+        self._entries.update({
+            entry.id: _replaced(
                 entry,
                 polyline=line,
                 support=support if support.size else None,
@@ -658,6 +661,8 @@ class PolylineMap:
                 misses=0,
                 last_seen=stamp,
             )
+            for entry, (line, support) in zip(entries, merged, strict=True)
+        })
         return set(by_map)
 
     def _weights_along(self, line: Polyline, parts: list[MapPolyline]) -> np.ndarray | None:
@@ -796,6 +801,11 @@ class _Entries(dict):
     def __delitem__(self, map_id: int) -> None:
         self.version += 1
         super().__delitem__(map_id)
+
+    def update(self, entries: Mapping[int, MapPolyline]) -> None:
+        """Replace or add ``entries`` by id (one count for all: a merge replaces many)."""
+        self.version += 1
+        super().update(entries)
 
 
 class _Geometry(NamedTuple):

@@ -279,6 +279,7 @@ def merge(
     edge_weights: ArrayLike | None = None,
     end_weights: ArrayLike | None = None,
     end_tolerance: float | None = None,
+    counts: ArrayLike | None = None,
 ) -> list[tuple[Polyline, np.ndarray]]:
     """Merge what one observation saw of each map polyline into it (docs/design.md#detail-7).
 
@@ -309,7 +310,9 @@ def merge(
         The map polylines; each keeps its direction.
     observations
         Per map polyline, the scan polylines associated with it, in the same frame; each
-        is reversed where it runs the other way along the map polyline.
+        is reversed where it runs the other way along the map polyline. With ``counts``:
+        all of them in one sequence (e.g. a :class:`PackedPolylines` taken from a scan's,
+        which is not packed again), map polyline by map polyline.
     epsilon
         Douglas-Peucker tolerance (m) of the re-simplification, ``> 0``.
     edge_weights
@@ -321,6 +324,9 @@ def merge(
     end_tolerance
         Ends closer than this (m) are the same end seen again and are averaged; farther
         scan ends extend the map. Default ``END_TOLERANCE_FACTOR * epsilon``.
+    counts
+        Per map polyline, how many of the (flat) ``observations`` are its own, in order.
+        Default: ``observations`` is nested, one sequence per map polyline.
 
     Returns
     -------
@@ -353,6 +359,8 @@ def merge(
     ...  for line, _ in merge([chord], [[corner_seen]], 0.03, edge_weights=[20.0, 20.0],
     ...                       end_weights=[20.0])]
     [[[0.802, 0.0], [1.0, -0.1], [1.0, -1.0]]]
+    >>> [line.points.round(3).tolist() for line, _ in merge([wall], parts, 0.03, counts=[2])]
+    [[[0.0, 0.01], [4.0, 0.01]]]
     """
     if not epsilon > 0.0:
         raise ValueError(f"merge: epsilon must be > 0 m, got {epsilon!r}")
@@ -360,19 +368,32 @@ def merge(
     if not tolerance >= 0.0:
         raise ValueError(f"merge: end_tolerance must be >= 0 m, got {end_tolerance!r}")
     lines = as_polylines(map_polylines)
-    if len(observations) != len(lines):
+    if counts is None:
+        parts = as_polylines([part for line_parts in observations for part in line_parts])
+        per_line = list(map(len, observations))
+    else:
+        parts = as_polylines(observations)
+        per_line = np.asarray(counts).reshape(-1).tolist()
+        if not (
+            all(isinstance(count, int) and count >= 0 for count in per_line)
+            and sum(per_line) == len(parts)
+        ):
+            raise ValueError(
+                f"merge: counts must be integers >= 0 that add up to the {len(parts)} "
+                f"observations, got {counts!r}"
+            )
+    if len(per_line) != len(lines):
         raise ValueError(
             f"merge: need one observation per map polyline, got {len(lines)} polylines and "
-            f"{len(observations)} observations"
+            f"{len(per_line)} observations"
         )
     sizes = lines.offsets[1:] - lines.offsets[:-1]
     weight_offsets = run_offsets(np.maximum(sizes - 1, 0).tolist(), len(lines))
     weights = _checked_weights("edge_weights", edge_weights, int(weight_offsets[-1]),
                                "edge of the map polylines")
     point_weights = _checked_weights("end_weights", end_weights, len(lines), "map polyline")
-    parts = as_polylines([part for line_parts in observations for part in line_parts])
     # Polyline k's parts are pieces first_parts[k] to first_parts[k + 1] - 1 of parts.
-    first_parts = run_offsets(map(len, observations), len(observations))
+    first_parts = run_offsets(per_line, len(per_line))
     merged, merged_offsets, merged_weights, merged_weight_offsets, changed = _merge_all(
         lines.points, lines.offsets, weights, weight_offsets, parts.points, parts.offsets,
         first_parts, point_weights, tolerance, epsilon,
@@ -381,12 +402,11 @@ def merge(
     bounds, merged_bounds = weight_offsets.tolist(), merged_weight_offsets.tolist()
     # (Read-only after the call: the kernel's signature takes writeable arrays.)
     weights.flags.writeable = merged_weights.flags.writeable = False
+    # (Indexed, not zipped: the map's polylines are looked up only where nothing changed.)
     return [
-        (view, merged_weights[merged_bounds[k] : merged_bounds[k + 1]]) if is_changed
-        else (line, weights[bounds[k] : bounds[k + 1]])
-        for k, (line, view, is_changed) in enumerate(
-            zip(lines, views, changed.tolist(), strict=True)
-        )
+        (views[k], merged_weights[merged_bounds[k] : merged_bounds[k + 1]]) if is_changed
+        else (lines[k], weights[bounds[k] : bounds[k + 1]])
+        for k, is_changed in enumerate(changed.tolist())
     ]
 
 

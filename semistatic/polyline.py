@@ -344,6 +344,8 @@ class PackedPolylines(list):
         >>> taken = lines.take([2, 0], reverse=[True, False])
         >>> taken.points.tolist(), taken.offsets.tolist(), taken[1] is lines[0]
         ([[3.0, 1.0], [2.0, 0.0], [0.0, 0.0], [1.0, 0.0]], [0, 2, 4], True)
+        >>> lines.take([0, 1, 2]) is lines  # all of them in order: nothing to gather
+        True
         """
         # C-contiguous, the one layout the kernel is compiled for (np.nonzero's are not).
         picks = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1)
@@ -359,8 +361,11 @@ class PackedPolylines(list):
                 f"PackedPolylines.take: need indices in [0, {count}) and one reverse flag "
                 f"each, got {picks.size} indices and {flips.size} flags"
             )
+        flipped = flips.tolist()
+        if positions == list(range(count)) and not any(flipped):
+            return self  # all of them, in order: the set itself (it is read-only)
         points, offsets = _take_runs(self.points, self.offsets, picks, flips)
-        return _Unmade.of(points, offsets, None, ("take", self, positions, flips.tolist()))
+        return _Unmade.of(points, offsets, None, ("take", self, positions, flipped))
 
     @property
     def boxes(self) -> np.ndarray:

@@ -314,16 +314,17 @@ def visibility(
     sizes = (lines.offsets[1:] - lines.offsets[:-1]).tolist()
     for k in [k for k, size in enumerate(sizes) if size < 2]:
         counts[k] = _point_counts(lines[k], scan, pose, limit, margin)
-    pieces, stored = [], 0
-    spans = spans.tolist()
-    for line, number in zip(lines, piece_counts.tolist(), strict=True):
-        if number < 0:
-            pieces.append(None)
-            continue
-        pieces.append(PackedPolylines(
-            [_arc_piece(line, low, high) for low, high in spans[stored : stored + number]]
-        ))
-        stored += number
+    pieces: list[PackedPolylines | None] = [None] * len(sizes)
+    stored = 0
+    # (Only the polylines the scan cut are looked at: most are not, most scans.)
+    for k, number in enumerate(piece_counts.tolist()):
+        if number >= 0:
+            line = lines[k]
+            pieces[k] = PackedPolylines([
+                _arc_piece(line, low, high)
+                for low, high in spans[stored : stored + number].tolist()
+            ])
+            stored += number
     return Visibility(counts[:, 0], counts[:, 1], counts[:, 2], pieces, params.min_points)
 
 
