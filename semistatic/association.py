@@ -389,10 +389,10 @@ def _candidates(
 ):  # pragma: no cover - compiled
     """Return the candidates of :func:`associate`, packed and ordered, in one call.
 
-    ``(rows, order, reversed_, feasible, scan_points, scan_bounds, map_points,
-    map_bounds)``: the scan polylines (``rows``) and the map polylines in counter-clockwise
-    order around ``pose`` (``order``; each packed reversed where it runs clockwise, as
-    ``reversed_`` says, unless not ``oriented``: then in input order, none reversed) that
+    ``(rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds)``: the
+    scan polylines (``rows``) and the map polylines in counter-clockwise order around
+    ``pose`` (``order``; each packed reversed where it runs clockwise, unless not
+    ``oriented``: then in input order, none reversed) that
     have a partner within ``gate``, which pairs of them can pass it, and their vertices
     packed.
 
@@ -410,8 +410,7 @@ def _candidates(
     feasible, map_points, map_bounds = _arranged(
         near, rows, columns, ranks, clockwise, map_points, map_bounds
     )
-    return (rows, columns[ranks], clockwise[ranks], feasible, scan_points, scan_bounds,
-            map_points, map_bounds)
+    return rows, columns[ranks], feasible, scan_points, scan_bounds, map_points, map_bounds
 
 
 @numba.njit(cache=True)
@@ -575,7 +574,7 @@ def associate(
     # Only polylines with at least one partner near enough to pass the gate take part:
     # the others could only fill the path with pairs the gate rejects. One kernel call
     # finds them, packs them and orders them.
-    rows, order, reversed_, feasible, scan_points, scan_bounds, map_points, map_bounds = (
+    rows, order, feasible, scan_points, scan_bounds, map_points, map_bounds = (
         _candidates(
             scans.boxes, maps.boxes, float(gate), scans.points, scans.offsets, maps.points,
             maps.offsets, _NO_POSE if pose is None else pose, pose is not None,
@@ -585,17 +584,17 @@ def associate(
         return ValidatedPairs()
     # The map polylines as the kernels see them: in counter-clockwise order and direction.
     pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
+    # The candidates as sets: those the kernel packed (the map's run the scan's way).
+    candidate_scans = PackedPolylines.from_runs(scan_points, scan_bounds)
+    candidate_maps = PackedPolylines.from_runs(map_points, map_bounds)
     if not forced:
-        costs = _similarity_costs(feasible, scans.take(rows), maps.take(order, reversed_))
+        costs = _similarity_costs(feasible, candidate_scans, candidate_maps)
         path = np.array(optimal_path(costs), dtype=np.int64).reshape(-1, 2)
         pairs = _gateable(path, feasible, scan_bounds, map_bounds)
-    # The pairs' polylines, the map's run the scan's way. Stops early above the gate: the
-    # value is then only a lower bound, but one that fails the gate exactly when the full
-    # distance does.
-    columns = pairs[:, 1]
+    # Stops early above the gate: the value is then only a lower bound, but one that fails
+    # the gate exactly when the full distance does.
     distances = restricted_hausdorff(
-        scans.take(rows[pairs[:, 0]]), maps.take(order[columns], reversed_[columns]), mode,
-        limit=float(gate),
+        candidate_scans, candidate_maps, mode, limit=float(gate), pairs=pairs
     ).tolist()
     rows, order = rows.tolist(), order.tolist()
     a, b = pairs[:, 0].tolist(), pairs[:, 1].tolist()

@@ -112,7 +112,10 @@ def restrict(p0: Polyline | ArrayLike, p1: Polyline | ArrayLike, mode: str = "ve
 
 
 def hausdorff(
-    p0: Polyline | ArrayLike | PackedPolylines, p1: Polyline | ArrayLike | PackedPolylines
+    p0: Polyline | ArrayLike | PackedPolylines,
+    p1: Polyline | ArrayLike | PackedPolylines,
+    *,
+    pairs: ArrayLike | None = None,
 ) -> float | np.ndarray:
     """Return the symmetric Hausdorff distance between two polylines as continuous curves.
 
@@ -120,7 +123,8 @@ def hausdorff(
     curve, and no point is farther by more than the tolerance). A single vertex is a
     point; an empty polyline gives ``inf``. Two
     :class:`~semistatic.polyline.PackedPolylines` of equal length are compared element by
-    element in one compiled call (as shapely's functions take arrays of geometries).
+    element in one compiled call (as shapely's functions take arrays of geometries), or,
+    with ``pairs`` (``(K, 2)`` indices ``(i, j)``), ``p0[i]`` with ``p1[j]`` for each pair.
 
     Examples
     --------
@@ -133,7 +137,7 @@ def hausdorff(
     >>> hausdorff([[0, 0]], np.empty((0, 2)))
     inf
     """
-    return _measured("hausdorff", p0, p1, _UNRESTRICTED, math.inf)
+    return _measured("hausdorff", p0, p1, _UNRESTRICTED, math.inf, pairs)
 
 
 def restricted_hausdorff(
@@ -142,6 +146,7 @@ def restricted_hausdorff(
     mode: str = "vertex",
     *,
     limit: float = math.inf,
+    pairs: ArrayLike | None = None,
 ) -> float | np.ndarray:
     """Return the restricted Hausdorff distance ``hausdorff(P0|P1, P1|P0)``.
 
@@ -157,6 +162,10 @@ def restricted_hausdorff(
         A gate (m): once the distance is known to exceed it, the search stops and returns
         the value found so far, a lower bound above ``limit``. So ``result <= limit``
         decides a gate exactly as the full distance does, at a fraction of the cost.
+    pairs
+        For two sets: ``(K, 2)`` indices ``(i, j)``, the distance of ``p0[i]`` and
+        ``p1[j]`` for each (the sets may then differ in length). Default: element by
+        element.
 
     Returns
     -------
@@ -176,26 +185,56 @@ def restricted_hausdorff(
     >>> walls = PackedPolylines([wall, [[0.0, 1.0], [10.0, 1.0]]])
     >>> restricted_hausdorff(walls, PackedPolylines([part, part]), "projection").round(3)
     array([0.08, 0.92])
+    >>> restricted_hausdorff(walls, PackedPolylines([part]), "projection",
+    ...                      pairs=[[1, 0], [0, 0]]).round(3)
+    array([0.92, 0.08])
     """
-    return _measured("restricted_hausdorff", p0, p1, _mode_code(mode), float(limit))
+    return _measured("restricted_hausdorff", p0, p1, _mode_code(mode), float(limit), pairs)
 
 
 def _measured(
     caller: str, p0: Polyline | ArrayLike | PackedPolylines,
     p1: Polyline | ArrayLike | PackedPolylines, code: int, limit: float,
+    pairs: ArrayLike | None,
 ) -> float | np.ndarray:
     """Return the distance (code 0: plain, else a restriction) of two polylines or sets."""
     if isinstance(p0, PackedPolylines) and isinstance(p1, PackedPolylines):
-        if len(p0) != len(p1):
-            raise ValueError(
-                f"{caller}: two polyline sets must be as long, got {len(p0)} and {len(p1)}"
-            )
-        return _distances(p0.points, p0.offsets, p1.points, p1.offsets, code, limit)
+        count0, count1 = len(p0), len(p1)
+        if pairs is None:
+            if count0 != count1:
+                raise ValueError(
+                    f"{caller}: two polyline sets must be as long, got {count0} and {count1}"
+                )
+            pairs = _aligned_pairs(count0)
+        else:
+            pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+            if pairs.size and not (
+                pairs.min() >= 0 and pairs[:, 0].max() < count0 and pairs[:, 1].max() < count1
+            ):
+                raise ValueError(
+                    f"{caller}: pairs must index the two sets ({count0} and {count1} "
+                    f"polylines), got {pairs.tolist()}"
+                )
+        return _distances(p0.points, p0.offsets, p1.points, p1.offsets, pairs, code, limit)
+    if pairs is not None:
+        raise ValueError(f"{caller}: pairs index two PackedPolylines; got single polylines")
     points0 = _kernel_points(as_polyline(p0))
     points1 = _kernel_points(as_polyline(p1))
     bounds0 = np.array([0, points0.shape[0]], dtype=np.int64)
     bounds1 = np.array([0, points1.shape[0]], dtype=np.int64)
-    return float(_distances(points0, bounds0, points1, bounds1, code, limit)[0])
+    return float(_distances(points0, bounds0, points1, bounds1, _aligned_pairs(1), code,
+                            limit)[0])
+
+
+# The pairs (k, k) of two sets compared element by element, one read-only array per size.
+_ALIGNED: dict[int, np.ndarray] = {}
+
+
+def _aligned_pairs(count: int) -> np.ndarray:
+    pairs = _ALIGNED.get(count)
+    if pairs is None:
+        pairs = _ALIGNED[count] = np.repeat(np.arange(count, dtype=np.int64), 2).reshape(-1, 2)
+    return pairs
 
 
 def _mode_code(mode: str) -> int:
@@ -216,10 +255,11 @@ def _kernel_points(polyline: Polyline) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _distances(points0, bounds0, points1, bounds1, mode, limit):  # pragma: no cover
+def _distances(points0, bounds0, points1, bounds1, pairs, mode, limit):  # pragma: no cover
     """Return the (restricted) Hausdorff distance of each pair of packed polylines.
 
-    Pair ``p`` is ``points0[bounds0[p]:bounds0[p + 1]]`` and the same run of ``points1``.
+    Pair ``p`` is run ``pairs[p, 0]`` of ``points0`` (``points0[bounds0[a]:bounds0[a + 1]]``)
+    and run ``pairs[p, 1]`` of ``points1``.
     ``mode`` 0: no restriction; 1: ``"vertex"``; 2: ``"projection"``. A pair's search
     stops as soon as its best distance exceeds ``limit`` (a lower bound above ``limit``).
     The one entry point of the module's distances, and the search is written inline: a
@@ -244,11 +284,12 @@ def _distances(points0, bounds0, points1, bounds1, mode, limit):  # pragma: no c
     segment interiors). Every ``d_j`` is 1-Lipschitz, so the bound exceeds ``f(a)`` by at
     most the piece length: halving after ``_CHORD_SPLITS`` rounds ends the search.
     """
-    distances = np.empty(bounds0.size - 1)
+    distances = np.empty(pairs.shape[0])
     for p in range(distances.size):
+        a, b = pairs[p, 0], pairs[p, 1]
         # Leading-axis slices of C arrays stay C arrays: one specialisation.
-        cut0 = points0[bounds0[p] : bounds0[p + 1]]
-        cut1 = points1[bounds1[p] : bounds1[p + 1]]
+        cut0 = points0[bounds0[a] : bounds0[a + 1]]
+        cut1 = points1[bounds1[b] : bounds1[b + 1]]
         if cut0.shape[0] == 0 or cut1.shape[0] == 0:
             distances[p] = math.inf
             continue

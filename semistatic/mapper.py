@@ -633,24 +633,25 @@ class PolylineMap:
     ) -> set[int]:
         if not associated:
             return set()
-        # The association's packed map (nothing changed it since): taken, not packed again,
-        # in map order (often the whole map, in its order: then it is the map's set itself).
+        # The whole map merges, as the association packed it (nothing changed it since): a
+        # polyline no scan polyline was paired with comes back as it was, and stays.
         geometry = self._geometry()
-        by_map: dict[int, list[int]] = {}
-        for pair in sorted(associated, key=lambda pair: geometry.positions[pair.map_id]):
-            by_map.setdefault(pair.map_id, []).append(pair.scan_index)
+        parts: dict[int, list[int]] = {}  # scan indices by map position
+        for pair in associated:
+            parts.setdefault(geometry.positions[pair.map_id], []).append(pair.scan_index)
+        every = list(self._entries.values())
         epsilon = self.params.epsilon
-        entries = [self._entries[map_id] for map_id in by_map]
-        groups = list(by_map.values())
         merged = merge(
-            geometry.lines.take([geometry.positions[map_id] for map_id in by_map]),
-            observed.take([index for scan_indices in groups for index in scan_indices]),
+            geometry.lines,
+            observed.take([index for position in sorted(parts) for index in parts[position]]),
             epsilon,
-            counts=list(map(len, groups)),
-            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
-            end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
+            counts=[len(parts.get(position, ())) for position in range(len(every))],
+            edge_weights=np.concatenate([entry.edge_weights for entry in every]),
+            end_weights=np.minimum([float(entry.hits) for entry in every], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )
+        entries = [every[position] for position in parts]
+        merged = [merged[position] for position in parts]
         self._entries.update({
             entry.id: _replaced(
                 entry,
@@ -663,7 +664,7 @@ class PolylineMap:
             )
             for entry, (line, support) in zip(entries, merged, strict=True)
         })
-        return set(by_map)
+        return {entry.id for entry in entries}
 
     def _weights_along(self, line: Polyline, parts: list[MapPolyline]) -> np.ndarray | None:
         """Return the edge weights ``line`` takes over from the entries it was made of.

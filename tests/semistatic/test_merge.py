@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from semistatic.hausdorff import hausdorff
 from semistatic.merge import END_TOLERANCE_FACTOR, merge, project_onto, transfer_weights
-from semistatic.polyline import Polyline
+from semistatic.polyline import PackedPolylines, Polyline
 from tests.semistatic.conftest import NASTY_POLYLINES
 
 EPSILON = 0.03
@@ -349,3 +349,18 @@ def test_many_map_polylines_merge_as_each_alone():
     # An observation without vertices leaves its map polyline and weights as they were.
     np.testing.assert_array_equal(merged[3][0].points, BOX + 2.0)
     np.testing.assert_array_equal(merged[3][1], [1.0, 1.0])
+
+
+def test_flat_observations_with_counts_merge_as_the_nested_ones():
+    """``counts`` groups one flat (packed) sequence; each map polyline merges as alone."""
+    maps = [WALL, BOX, [[5.0, 5.0]], BOX + 2.0]
+    nested = [[WALL + 0.02], [BOX[:2] + 0.01, BOX[1:] - 0.01], [[[5.0, 5.1]]], []]
+    flat = PackedPolylines([part for parts in nested for part in parts])
+    for k, parts in enumerate(nested):
+        ((alone, alone_weights),) = merge([maps[k]], [parts], EPSILON)
+        (line, weights) = merge(maps, flat, EPSILON, counts=[1, 2, 1, 0])[k]
+        np.testing.assert_array_equal(line.points, alone.points)
+        np.testing.assert_array_equal(weights, alone_weights)
+    for counts in ([1, 2, 1], [1, 2, 1, 1], [1, 2.5, 0.5, 0], [2, 2, 1, -1]):
+        with pytest.raises(ValueError, match=r"counts|one observation per map polyline"):
+            merge(maps, flat, EPSILON, counts=counts)
