@@ -208,9 +208,8 @@ def _measured(
             pairs = _aligned_pairs(count0)
         else:
             pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
-            if pairs.size and not (
-                pairs.min() >= 0 and pairs[:, 0].max() < count0 and pairs[:, 1].max() < count1
-            ):
+            # (Over Python ints: a few pairs cost less so than numpy's reductions.)
+            if not all(0 <= i < count0 and 0 <= j < count1 for i, j in pairs.tolist()):
                 raise ValueError(
                     f"{caller}: pairs must index the two sets ({count0} and {count1} "
                     f"polylines), got {pairs.tolist()}"

@@ -556,16 +556,12 @@ class PolylineMap:
         """
         ids, lines, _ = self._geometry()
         seen = visibility(lines, scan, pose, self.params)
-        others = {
-            map_id: (missing, pieces)
-            for map_id, missing, pieces in zip(ids, seen.missing.tolist(), seen.pieces,
-                                               strict=True)
-            if map_id not in changed
-        }
-        cuts = {
-            map_id: pieces for map_id, pieces in zip(ids, seen.pieces, strict=True)
-            if map_id in changed and pieces is not None
-        }
+        others, cuts = {}, {}
+        for map_id, missing, pieces in zip(ids, seen.missing.tolist(), seen.pieces, strict=True):
+            if map_id not in changed:
+                others[map_id] = (missing, pieces)
+            elif pieces is not None:
+                cuts[map_id] = pieces
         cut_away: list[int] = []
         if cuts:
             observations = {pair.map_id: observed[pair.scan_index] for pair in associated}

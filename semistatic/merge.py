@@ -40,6 +40,7 @@ array([[0.   , 0.005],
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -373,7 +374,7 @@ def merge(
         per_line = list(map(len, observations))
     else:
         parts = as_polylines(observations)
-        per_line = np.asarray(counts).reshape(-1).tolist()
+        per_line = counts if type(counts) is list else np.asarray(counts).reshape(-1).tolist()
         if not (
             all(isinstance(count, int) and count >= 0 for count in per_line)
             and sum(per_line) == len(parts)
@@ -387,8 +388,10 @@ def merge(
             f"merge: need one observation per map polyline, got {len(lines)} polylines and "
             f"{len(per_line)} observations"
         )
-    sizes = lines.offsets[1:] - lines.offsets[:-1]
-    weight_offsets = run_offsets(np.maximum(sizes - 1, 0).tolist(), len(lines))
+    # (Over Python ints: a map's few dozen polylines cost less so than numpy's calls.)
+    edge_counts = [max(stop - start - 1, 0)
+                   for start, stop in itertools.pairwise(lines.offsets.tolist())]
+    weight_offsets = run_offsets(edge_counts, len(edge_counts))
     weights = _checked_weights("edge_weights", edge_weights, int(weight_offsets[-1]),
                                "edge of the map polylines")
     point_weights = _checked_weights("end_weights", end_weights, len(lines), "map polyline")

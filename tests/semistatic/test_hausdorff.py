@@ -310,3 +310,27 @@ def test_two_sets_are_measured_pair_by_pair(mode):
                                                                          strict=True)]
     with pytest.raises(ValueError, match="as long"):
         restricted_hausdorff(sets[0], PackedPolylines(second[:3]))
+
+
+def test_pairs_index_two_sets_of_any_length():
+    """``pairs=(i, j)``: ``p0[i]`` against ``p1[j]``, each as the single-polyline call gives it."""
+    rng = np.random.default_rng(11)
+    first = [np.cumsum(rng.normal(0.0, 0.5, (int(rng.integers(1, 6)), 2)), axis=0)
+             for _ in range(7)]
+    second = [np.cumsum(rng.normal(0.0, 0.5, (int(rng.integers(1, 6)), 2)), axis=0)
+              for _ in range(4)]
+    pairs = np.array([[6, 0], [0, 3], [0, 3], [2, 1], [5, 2]])
+    sets = PackedPolylines(first), PackedPolylines(second)
+    for mode in ("vertex", "projection"):
+        assert restricted_hausdorff(*sets, mode, pairs=pairs).tolist() == [
+            restricted_hausdorff(first[i], second[j], mode) for i, j in pairs.tolist()
+        ]
+    distances = hausdorff(*sets, pairs=pairs)
+    np.testing.assert_allclose(distances, [_reference_hausdorff(first[i], second[j])
+                                           for i, j in pairs.tolist()], atol=2e-3)
+    assert hausdorff(*sets, pairs=np.empty((0, 2), int)).shape == (0,)
+    for bad in ([[7, 0]], [[0, 4]], [[-1, 0]]):
+        with pytest.raises(ValueError, match="pairs must index"):
+            restricted_hausdorff(*sets, pairs=bad)
+    with pytest.raises(ValueError, match="pairs index two PackedPolylines"):
+        hausdorff(first[0], second[0], pairs=[[0, 0]])
