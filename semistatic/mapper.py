@@ -629,25 +629,25 @@ class PolylineMap:
     ) -> set[int]:
         if not associated:
             return set()
-        # The whole map merges, as the association packed it (nothing changed it since): a
-        # polyline no scan polyline was paired with comes back as it was, and stays.
+        # The association's packed map (nothing changed it since): taken, not packed again,
+        # in map order (when every polyline was paired: the map's set itself).
         geometry = self._geometry()
         parts: dict[int, list[int]] = {}  # scan indices by map position
         for pair in associated:
             parts.setdefault(geometry.positions[pair.map_id], []).append(pair.scan_index)
+        positions = sorted(parts)
         every = list(self._entries.values())
+        entries = [every[position] for position in positions]
         epsilon = self.params.epsilon
         merged = merge(
-            geometry.lines,
-            observed.take([index for position in sorted(parts) for index in parts[position]]),
+            geometry.lines.take(positions),
+            observed.take([index for position in positions for index in parts[position]]),
             epsilon,
-            counts=[len(parts.get(position, ())) for position in range(len(every))],
-            edge_weights=np.concatenate([entry.edge_weights for entry in every]),
-            end_weights=np.minimum([float(entry.hits) for entry in every], MAX_MERGE_WEIGHT),
+            counts=[len(parts[position]) for position in positions],
+            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
+            end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )
-        entries = [every[position] for position in parts]
-        merged = [merged[position] for position in parts]
         self._entries.update({
             entry.id: _replaced(
                 entry,
