@@ -1,7 +1,7 @@
 """Test-suite set-up shared by the tests and the packages' doctests.
 
 Doctests cannot carry a marker, so the few whose examples run a bundled scenario's closed
-loop (tens of seconds each, a fifth of ``make test``) are marked ``slow`` here by name:
+loop (seconds to tens of seconds each) are marked ``slow`` here by name:
 ``make test`` leaves them out, ``make test-all`` (and CI) runs them. A renamed one
 is caught by tests/test_slow_doctests.py.
 """
@@ -12,13 +12,15 @@ import pytest
 
 from semistatic.kernel_cache import warm_kernel_cache
 
-# Measured with --durations (warm cache, one core): 21, 13, 10, 8 and 5 s.
+# Measured with --durations (warm cache, one core): 21, 13, 10, 8, 5, 4 and 3 s.
 CLOSED_LOOP_DOCTESTS = {
     "scenarios.bench.testbench.Testbench.run_lap",
     "scenarios.bench.testbench.Testbench.run",
     "scenarios.bench.testbench.Testbench",
     "scenarios.bench.sharing",
     "scenarios.bench.runner.run_scenario",
+    "scenarios.results.emergence",
+    "scenarios.results.stopping",
 }
 
 

@@ -54,6 +54,7 @@ def test_a_lap_that_times_out_fails_the_run_and_is_recorded(capsys, tmp_path):
     assert "precision" not in stdout
 
 
+@pytest.mark.slow
 def test_compare_runs_every_bundled_policy_and_reports_their_safety(capsys, tmp_path):
     scenario = write_tiny(tmp_path)
     out = tmp_path / "out"

@@ -128,6 +128,7 @@ def test_the_safety_record_keeps_the_separation_to_test_pieces():
     assert metrics["min_separation_at"]["test_piece"]["object"] == "leg"
 
 
+@pytest.mark.slow
 def test_a_run_past_a_piece_reports_its_separation_and_sighting(capsys, tmp_path):
     # An upright piece beside the tiny path, outside the fields: the Pioneer drives past.
     # Its footprint is 0.381 m wide, centred on the path: 1.0 - 0.035 - 0.1905 m apart.
@@ -170,6 +171,7 @@ def first_stop(trial) -> dict:
     return trial.stops[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["upright", "lying"])
 def test_the_lgv_stops_short_of_either_piece(kind):
     speed = 1.0
@@ -191,6 +193,7 @@ def test_the_lgv_stops_short_of_either_piece(kind):
     assert trial.min_separation == pytest.approx(trial.gap, abs=0.005)
 
 
+@pytest.mark.slow
 def test_the_pioneer_stops_short_of_the_upright_piece_and_keeps_seeing_it():
     speed = 0.2
     trial = piece_trial(PIONEER3DX, speed, "upright")
@@ -208,6 +211,7 @@ def test_the_pioneer_stops_short_of_the_upright_piece_and_keeps_seeing_it():
     assert first_stop(trial)["object"] == "test_piece upright"
 
 
+@pytest.mark.slow
 def test_the_pioneer_cannot_see_the_lying_piece_and_its_contact_is_reported():
     trial = piece_trial(PIONEER3DX, 0.2, "lying")
     # The LMS100 scans at 0.35 m, over the 0.2 m piece: check says so, the run shows it.
@@ -219,6 +223,7 @@ def test_the_pioneer_cannot_see_the_lying_piece_and_its_contact_is_reported():
     assert trial.gap < 0.01
 
 
+@pytest.mark.slow
 def test_a_pioneer_too_fast_for_its_blind_zone_loses_the_upright_piece_and_touches_it():
     # The field reaches the LMS100's blind zone plus Z_G (0.1 m) and no further: at
     # 0.6 m/s braking alone (0.18 m) carries the piece into the blind zone before the

@@ -74,6 +74,7 @@ class Counter(Observer):
         self.calls["on_lap_end"].append(lap_log.lap)
 
 
+@pytest.mark.slow
 def test_stepping_tick_by_tick_gives_the_log_of_run(tiny_spec, tiny_log):
     counter = Counter()
     with Testbench(tiny_spec) as bench:
@@ -93,6 +94,7 @@ def test_stepping_tick_by_tick_gives_the_log_of_run(tiny_spec, tiny_log):
     assert counter.zones == {"free", "warning"}
 
 
+@pytest.mark.slow
 def test_run_lap_returns_each_lap_and_state_is_readable_between(tiny_spec, tiny_log):
     with Testbench(tiny_spec) as bench:
         bench.reset()
