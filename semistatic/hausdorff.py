@@ -225,7 +225,8 @@ def _measured(
                             limit)[0])
 
 
-# The pairs (k, k) of two sets compared element by element, one read-only array per size.
+# The pairs (k, k) of two sets compared element by element, one array per size (nothing
+# writes to it; writeable, as the kernel is compiled for).
 _ALIGNED: dict[int, np.ndarray] = {}
 
 

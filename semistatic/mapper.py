@@ -636,8 +636,7 @@ class PolylineMap:
         for pair in associated:
             parts.setdefault(geometry.positions[pair.map_id], []).append(pair.scan_index)
         positions = sorted(parts)
-        every = list(self._entries.values())
-        entries = [every[position] for position in positions]
+        entries = [self._entries[geometry.ids[position]] for position in positions]
         epsilon = self.params.epsilon
         merged = merge(
             geometry.lines.take(positions),
