@@ -26,14 +26,9 @@ docs: install
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
 # The fast suite (pyproject's addopts leave out the slow, bench, accuracy and fuzz markers),
-# one pytest-xdist worker per core (at most four; the kernels compile once, before them),
-# while the docs build beside it. Fails when either fails.
-test: lint install
-	@$(MAKE) --no-print-directory docs & docs=$$!; \
-	$(PY) -m pytest -q -n auto --maxprocesses 4; tests=$$?; \
-	wait $$docs; built=$$?; \
-	if [ $$built -ne 0 ]; then echo "make test: the docs build failed (see above)"; fi; \
-	exit $$(( tests || built ))
+# one pytest-xdist worker per core (at most four; the kernels compile once, before them).
+test: lint docs
+	$(PY) -m pytest -q -n auto --maxprocesses 4
 
 # Every test including the slow ones (closed-loop determinism of every bundled scenario,
 # fleets, real logs); bench, accuracy and fuzz keep their own targets.
