@@ -99,7 +99,10 @@ def box_gap(boxes_a, k, boxes_b, m):  # pragma: no cover - compiled
 
 
 def _viewpoint_pose(viewpoint: ArrayLike) -> np.ndarray:
-    pose = np.asarray(viewpoint, dtype=float).reshape(-1)
+    pose = viewpoint
+    # (A map update's pose is such an array already: no numpy call for it.)
+    if not (type(pose) is np.ndarray and pose.dtype == np.float64 and pose.shape == (3,)):
+        pose = np.asarray(viewpoint, dtype=float).reshape(-1)
     if pose.shape == (2,):
         pose = np.append(pose, 0.0)
     # (Three Python floats: numpy's per-call cost would exceed the test itself.)
@@ -585,8 +588,9 @@ def associate(
     # The map polylines as the kernels see them: in counter-clockwise order and direction.
     pairs, forced = _forced_kernel(feasible, scan_points, scan_bounds, map_points, map_bounds)
     # The candidates as sets: those the kernel packed (the map's run the scan's way).
-    candidate_scans = PackedPolylines.from_runs(scan_points, scan_bounds)
-    candidate_maps = PackedPolylines.from_runs(map_points, map_bounds)
+    # (Vertices gathered from the two sets, which are finite.)
+    candidate_scans = PackedPolylines.from_runs(scan_points, scan_bounds, check_finite=False)
+    candidate_maps = PackedPolylines.from_runs(map_points, map_bounds, check_finite=False)
     if not forced:
         costs = _similarity_costs(feasible, candidate_scans, candidate_maps)
         path = np.array(optimal_path(costs), dtype=np.int64).reshape(-1, 2)
@@ -597,11 +601,12 @@ def associate(
         candidate_scans, candidate_maps, mode, limit=float(gate), pairs=pairs
     ).tolist()
     rows, order = rows.tolist(), order.tolist()
-    a, b = pairs[:, 0].tolist(), pairs[:, 1].tolist()
-    kept = [k for k, distance in enumerate(distances) if distance <= gate]
-    return ValidatedPairs(
-        [(rows[a[k]], order[b[k]]) for k in kept], [distances[k] for k in kept]
-    )
+    kept = [
+        (k, (rows[i], order[j]))
+        for k, ((i, j), distance) in enumerate(zip(pairs.tolist(), distances, strict=True))
+        if distance <= gate
+    ]
+    return ValidatedPairs([pair for _, pair in kept], [distances[k] for k, _ in kept])
 
 
 def _similarity_costs(

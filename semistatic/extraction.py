@@ -519,7 +519,10 @@ def extract_polylines(
     if pose is not None:
         # All vertices moved in one transform, into a fresh array the polylines can view.
         vertices = transform_points(pose, vertices)
-    return PackedPolylines.from_runs(vertices, bounds, beams)
+    # (Finite: the readings kept are finite and in range, a fitted vertex falls back to a
+    # reading's projection where lines are near parallel or a beam grazes them, and the
+    # pose is finite.)
+    return PackedPolylines.from_runs(vertices, bounds, beams, check_finite=False)
 
 
 def _extracted_vertices(

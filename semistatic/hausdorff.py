@@ -209,7 +209,11 @@ def _measured(
         else:
             pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
             # (Over Python ints: a few pairs cost less so than numpy's reductions.)
-            if not all(0 <= i < count0 and 0 <= j < count1 for i, j in pairs.tolist()):
+            flat = pairs.reshape(-1).tolist()
+            if flat and not (
+                min(flat[0::2]) >= 0 and max(flat[0::2]) < count0
+                and min(flat[1::2]) >= 0 and max(flat[1::2]) < count1
+            ):
                 raise ValueError(
                     f"{caller}: pairs must index the two sets ({count0} and {count1} "
                     f"polylines), got {pairs.tolist()}"

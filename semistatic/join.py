@@ -134,14 +134,14 @@ def overlapping_groups(
     if not pairs:
         return []
     # A polyline without repeated vertices serves as it is.
-    measured = {
-        k: lines[k] if distinct[k].shape[0] == len(lines[k]) else Polyline(distinct[k])
+    measured = PackedPolylines([
+        lines[k] if distinct[k].shape[0] == len(lines[k]) else Polyline(distinct[k])
         for k in members
-    }
+    ])
+    position = {k: n for n, k in enumerate(members)}
     distances = restricted_hausdorff(
-        PackedPolylines([measured[a] for a, _ in pairs]),
-        PackedPolylines([measured[b] for _, b in pairs]),
-        mode, limit=gate,
+        measured, measured, mode, limit=gate,
+        pairs=[(position[a], position[b]) for a, b in pairs],
     ).tolist()
     parent = list(range(len(lines)))
 

@@ -556,12 +556,15 @@ class PolylineMap:
         """
         ids, lines, _ = self._geometry()
         seen = visibility(lines, scan, pose, self.params)
-        others, cuts = {}, {}
-        for map_id, missing, pieces in zip(ids, seen.missing.tolist(), seen.pieces, strict=True):
-            if map_id not in changed:
-                others[map_id] = (missing, pieces)
-            elif pieces is not None:
-                cuts[map_id] = pieces
+        cuts = {map_id: pieces for map_id, pieces in zip(ids, seen.pieces, strict=True)
+                if pieces is not None and map_id in changed}
+        # (Whether one is missing is worked out only when some polyline was not merged.)
+        others = {
+            map_id: (missing, pieces)
+            for map_id, missing, pieces in zip(ids, seen.missing.tolist(), seen.pieces,
+                                               strict=True)
+            if map_id not in changed
+        } if len(changed) < len(ids) else {}
         cut_away: list[int] = []
         if cuts:
             observations = {pair.map_id: observed[pair.scan_index] for pair in associated}
@@ -643,8 +646,11 @@ class PolylineMap:
             observed.take([index for position in positions for index in parts[position]]),
             epsilon,
             counts=[len(parts[position]) for position in positions],
-            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
-            end_weights=np.minimum([float(entry.hits) for entry in entries], MAX_MERGE_WEIGHT),
+            # (One entry, often: then its own weights, which merge copies anyway.)
+            edge_weights=entries[0].edge_weights if len(entries) == 1 else np.concatenate(
+                [entry.edge_weights for entry in entries]
+            ),
+            end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )
         self._entries.update({

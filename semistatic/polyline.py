@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import operator
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
@@ -269,7 +270,8 @@ class PackedPolylines(list):
 
     @classmethod
     def from_runs(
-        cls, points: np.ndarray, offsets: ArrayLike, scan_indices: ArrayLike | None = None
+        cls, points: np.ndarray, offsets: ArrayLike, scan_indices: ArrayLike | None = None,
+        *, check_finite: bool = True,
     ) -> PackedPolylines:
         """Return the polylines that are the consecutive runs of one fresh vertex array.
 
@@ -287,6 +289,12 @@ class PackedPolylines(list):
         scan_indices
             ``(N,)`` integer scan index of each vertex; default: the vertex order
             ``0..n-1`` within each polyline.
+        check_finite
+            Whether to check that ``points`` are finite (as scipy's ``check_finite``). Only
+            code whose points are finite by construction passes ``False`` (a kernel's output
+            from finite input): the check is one numpy reduction, and in a map update, with
+            the caches cold, each such call costs several microseconds, as much as a small
+            kernel. Shapes and offsets are checked either way.
 
         Examples
         --------
@@ -296,6 +304,10 @@ class PackedPolylines(list):
         ([[7, 8], [1, 2, 3]], [2.0, 2.0])
         >>> [len(line) for line in PackedPolylines.from_runs(points, [0, 3, 3, 5])]
         [3, 0, 2]
+        >>> PackedPolylines.from_runs(points * np.nan, [0, 5])  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: PackedPolylines.from_runs: need finite (N, 2) points and offsets from 0 to ...
         """
         points = np.ascontiguousarray(points, dtype=np.float64)
         offsets = np.asarray(offsets, dtype=np.int64)
@@ -304,8 +316,7 @@ class PackedPolylines(list):
             points.ndim == 2 and points.shape[1] == 2 and offsets.ndim == 1 and bounds
             and bounds[0] == 0 and bounds[-1] == points.shape[0]
             # A nan or inf anywhere makes the sum nan or inf; finite metres cannot overflow.
-            # (The ufunc's own reduce: a scan's sets are checked several times per update.)
-            and math.isfinite(np.add.reduce(points, axis=None))
+            and (not check_finite or math.isfinite(np.add.reduce(points, axis=None)))
         ):
             raise ValueError(
                 "PackedPolylines.from_runs: need finite (N, 2) points and offsets from 0 to "
@@ -347,24 +358,36 @@ class PackedPolylines(list):
         >>> lines.take([0, 1, 2]) is lines  # all of them in order: nothing to gather
         True
         """
-        # C-contiguous, the one layout the kernel is compiled for (np.nonzero's are not).
-        picks = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1)
-        flips = (
-            np.zeros(picks.size, np.bool_) if reverse is None
-            else np.ascontiguousarray(reverse, dtype=np.bool_).reshape(-1)
-        )
-        positions, count = picks.tolist(), len(self)
-        if flips.size != picks.size or (positions and not (
-            min(positions) >= 0 and max(positions) < count
-        )):
+        # (Over Python ints and bools: a map update takes sets of one to a few polylines,
+        # where each numpy call costs more than the gathering itself.)
+        positions = indices.reshape(-1).tolist() if isinstance(indices, np.ndarray) else indices
+        count = len(self)
+        try:
+            positions = [operator.index(k) for k in positions]
+            flipped = ([False] * len(positions) if reverse is None
+                       else np.asarray(reverse, dtype=np.bool_).reshape(-1).tolist())
+        except TypeError:
+            positions, flipped = [], None
+        if flipped is None or len(flipped) != len(positions) or not all(
+            0 <= k < count for k in positions
+        ):
             raise IndexError(
-                f"PackedPolylines.take: need indices in [0, {count}) and one reverse flag "
-                f"each, got {picks.size} indices and {flips.size} flags"
+                f"PackedPolylines.take: need integer indices in [0, {count}) and one reverse "
+                f"flag each, got indices {indices!r} and flags {reverse!r}"
             )
-        flipped = flips.tolist()
         if positions == list(range(count)) and not any(flipped):
             return self  # all of them, in order: the set itself (it is read-only)
-        points, offsets = _take_runs(self.points, self.offsets, picks, flips)
+        first = positions[0] if positions else 0
+        if positions == list(range(first, first + len(positions))) and not any(flipped):
+            # Consecutive polylines in order: their vertices are one block of rows already
+            # (a C-contiguous view, which nothing writes to, as the set's own points).
+            bounds = self.offsets[first : first + len(positions) + 1]
+            points, offsets = self.points[bounds[0] : bounds[-1]], bounds - bounds[0]
+        else:
+            points, offsets = _take_runs(
+                self.points, self.offsets, np.array(positions, dtype=np.int64),
+                np.array(flipped, dtype=np.bool_),
+            )
         return _Unmade.of(points, offsets, None, ("take", self, positions, flipped))
 
     @property

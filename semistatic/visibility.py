@@ -176,8 +176,10 @@ def extend_ends(
     origin_x, origin_y = np.asarray(viewpoint, dtype=float).reshape(-1)[:2].tolist()
     points = lines.points.copy()  # the ends move in place
     _extended_ends(points, lines.offsets, angle_increment, origin_x, origin_y, limit)
-    # Finite vertices moved by finite shifts: a fresh array of valid polylines.
-    return PackedPolylines.from_runs(points, lines.offsets, lines.scan_indices)
+    # Finite vertices moved by finite shifts (a nan or inf argument moves nothing: every
+    # comparison with nan fails), a fresh array of valid polylines.
+    return PackedPolylines.from_runs(points, lines.offsets, lines.scan_indices,
+                                     check_finite=False)
 
 
 @dataclass(frozen=True, eq=False)

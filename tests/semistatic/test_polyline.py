@@ -189,6 +189,39 @@ def test_take_gathers_runs_in_order_reversing_the_flagged_ones():
         lines.take([0, 1], reverse=[True])
 
 
+@pytest.mark.parametrize("indices", [[1, 2], np.array([0, 1]), [np.int64(1)], (2,)])
+def test_take_of_consecutive_polylines_equals_them_picked_one_by_one(indices):
+    lines = PackedPolylines([
+        Polyline([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], [4, 5, 6]),
+        Polyline([[5.0, 5.0]], [9]),
+        Polyline([[2.0, 0.0], [3.0, 1.0]], [1, 2]),
+    ])
+    picked = [int(k) for k in indices]
+    taken = lines.take(indices)
+    expected = _made_by_hand(lines, picked, [False] * len(picked))
+    np.testing.assert_array_equal(taken.points, np.concatenate([p for p, _ in expected]))
+    np.testing.assert_array_equal(
+        taken.offsets, np.cumsum([0] + [len(lines[k]) for k in picked])
+    )
+    # The one layout the kernels are compiled for.
+    assert taken.points.flags.c_contiguous
+    assert taken.points.dtype == np.float64
+    assert taken.offsets.dtype == np.int64
+    assert all(line is lines[k] for line, k in zip(taken, picked, strict=True))
+    for bad in ([0.5], ["a"], [[0, 1]]):
+        with pytest.raises(IndexError, match="integer indices"):
+            lines.take(bad)
+
+
+def test_from_runs_checks_shapes_and_offsets_without_the_finiteness_check():
+    points = np.array([[0.0, 0.0], [1.0, 0.0]])
+    assert len(PackedPolylines.from_runs(points, [0, 2], check_finite=False)) == 1
+    with pytest.raises(ValueError, match="offsets from 0 to N"):
+        PackedPolylines.from_runs(points, [0, 1], check_finite=False)
+    with pytest.raises(ValueError, match="decrease"):
+        PackedPolylines.from_runs(points, [0, 2, 1, 2], check_finite=False)
+
+
 @pytest.mark.parametrize("make", ["from_runs", "take"])
 def test_sets_whose_polylines_are_made_late_behave_as_lists_of_them(make):
     points = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 2.0], [3.0, 2.0], [4.0, 2.0]])
