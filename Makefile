@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test test-all run bench bench-all accuracy fuzz lint docs clean
+.PHONY: install test test-all run bench bench-all accuracy fuzz lint docs kernels clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -27,9 +27,16 @@ lint: install
 docs: install
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
 
+# The numba kernels compiled into the cache on every core (what the CLI and pytest's set-up
+# do first when the cache lacks them).
+kernels: install
+	$(PY) -c 'from semistatic.kernel_cache import warm_kernel_cache; warm_kernel_cache()'
+
 # The fast suite (pyproject's addopts leave out the slow, bench, accuracy and fuzz markers),
-# one pytest-xdist worker per core (at most four; the kernels compile once, before them).
-test: lint docs
+# one pytest-xdist worker per core (at most four), after the docs build and the kernels'
+# compilation, side by side: the one runs on one core, the other on all.
+test: lint
+	$(MAKE) --no-print-directory -j2 docs kernels
 	$(PY) -m pytest -q -n auto --maxprocesses 4
 
 # Every test including the slow ones (closed-loop determinism of every bundled scenario,
