@@ -171,26 +171,32 @@ def _coverage(field: shapely.Polygon, front: float, centre: float, vehicle_width
     half = 0.5 * vehicle_width
     ys = np.linspace(centre - half, centre + half,
                      max(3, int(np.ceil(vehicle_width / COVERAGE_STEP)) + 1))
-    reach = np.inf
-    _, _, x_max, _ = field.bounds
-    for y in ys:
-        line = shapely.intersection(field, shapely.LineString([(front - 1.0, y), (x_max + 1.0, y)]))
-        if line.is_empty:
-            return 0.0, 0.0
-        reach = min(reach, float(line.bounds[2]) - front)
-    start = max(front, float(field.bounds[0]))
+    x_min, y_min, x_max, y_max = field.bounds
+    # One GEOS call for all lines across the field (as many one by one cost ~25 us each).
+    rows = _crossings(field, [[(front - 1.0, y), (x_max + 1.0, y)] for y in ys.tolist()])
+    if rows is None:
+        return 0.0, 0.0
+    reach = min(float(x_end) - front for x_end in rows[:, 2].tolist())
+    start = max(front, float(x_min))
     xs = np.linspace(start, max(start, front + min(length, reach)),
                      max(3, int(np.ceil(length / COVERAGE_STEP)) + 1))
-    narrowest = np.inf
-    y_min, y_max = field.bounds[1], field.bounds[3]
-    for x in xs:
-        cut = shapely.intersection(field, shapely.LineString([(x, y_min - 1.0), (x, y_max + 1.0)]))
-        if cut.is_empty:
-            return max(0.0, reach), 0.0
-        # Width symmetric about the vehicle's centre line: the smaller side, twice.
-        low, high = cut.bounds[1], cut.bounds[3]
-        narrowest = min(narrowest, 2.0 * min(centre - low, high - centre))
+    columns = _crossings(field, [[(x, y_min - 1.0), (x, y_max + 1.0)] for x in xs.tolist()])
+    if columns is None:
+        return max(0.0, reach), 0.0
+    # Width symmetric about the vehicle's centre line: the smaller side, twice.
+    narrowest = min(
+        2.0 * min(centre - low, high - centre)
+        for low, high in zip(columns[:, 1].tolist(), columns[:, 3].tolist(), strict=True)
+    )
     return max(0.0, reach), max(0.0, narrowest)
+
+
+def _crossings(field: shapely.Polygon, lines: list) -> np.ndarray | None:
+    """Return the ``(N, 4)`` bounds of the field's part on each line, ``None`` if one misses it."""
+    parts = shapely.intersection(field, shapely.linestrings(np.array(lines, dtype=float)))
+    if shapely.is_empty(parts).any():
+        return None
+    return shapely.bounds(parts)
 
 
 def field_checks(spec: ScenarioSpec, world: WorldSpec, robot: UGVSpec) -> list[FieldCheck]:
