@@ -646,10 +646,7 @@ class PolylineMap:
             observed.take([index for position in positions for index in parts[position]]),
             epsilon,
             counts=[len(parts[position]) for position in positions],
-            # (One entry, often: then its own weights, which merge copies anyway.)
-            edge_weights=entries[0].edge_weights if len(entries) == 1 else np.concatenate(
-                [entry.edge_weights for entry in entries]
-            ),
+            edge_weights=np.concatenate([entry.edge_weights for entry in entries]),
             end_weights=[float(min(entry.hits, MAX_MERGE_WEIGHT)) for entry in entries],
             end_tolerance=END_TOLERANCE_FACTOR * epsilon,
         )

@@ -375,10 +375,10 @@ class PackedPolylines(list):
                 f"PackedPolylines.take: need integer indices in [0, {count}) and one reverse "
                 f"flag each, got indices {indices!r} and flags {reverse!r}"
             )
-        if positions == list(range(count)) and not any(flipped):
-            return self  # all of them, in order: the set itself (it is read-only)
         first = positions[0] if positions else 0
-        if positions == list(range(first, first + len(positions))) and not any(flipped):
+        if not any(flipped) and positions == list(range(first, first + len(positions))):
+            if len(positions) == count:
+                return self  # all of them, in order: the set itself (it is read-only)
             # Consecutive polylines in order: their vertices are one block of rows already
             # (a C-contiguous view, which nothing writes to, as the set's own points).
             bounds = self.offsets[first : first + len(positions) + 1]
