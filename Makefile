@@ -6,7 +6,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= results
 
-.PHONY: install test test-all run bench bench-all accuracy fuzz lint docs kernels clean
+.PHONY: install test test-all run bench bench-all accuracy accuracy-baseline fuzz lint docs \
+	kernels clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -52,8 +53,28 @@ bench: install
 bench-all: install
 	$(PY) -m pytest -q -s -m bench benchmarks
 
+# Map accuracy, statistically: a campaign of the five paper scenarios over ten seeds
+# compared with the stored baseline (exit 1 on a regression beyond the tolerances), then
+# the paper's hard bounds on full five-lap runs. `make accuracy-baseline` re-records the
+# baseline: only on purpose, and the commit says why.
+ACCURACY_CAMPAIGN = $(VENV)/bin/semistatic campaign pal1,pal3a,pal3b,sim1,sim2 --seeds 0:9 \
+	--laps 2 --jobs 2
+ACCURACY_BASELINE = tests/scenarios/accuracy_baseline
+
 accuracy: install
+	rm -rf $(OUT)/accuracy
+	$(ACCURACY_CAMPAIGN) --out $(OUT)/accuracy
+	$(VENV)/bin/semistatic compare $(ACCURACY_BASELINE) $(OUT)/accuracy \
+		--junit $(OUT)/accuracy/compare.xml --markdown $(OUT)/accuracy/compare.md
 	$(PY) -m pytest -q -m accuracy tests/scenarios/test_accuracy.py
+
+accuracy-baseline: install
+	rm -rf $(OUT)/accuracy-baseline
+	$(ACCURACY_CAMPAIGN) --no-figures --out $(OUT)/accuracy-baseline
+	rm -rf $(ACCURACY_BASELINE)
+	mkdir -p $(ACCURACY_BASELINE)
+	cp $(OUT)/accuracy-baseline/manifest.json $(OUT)/accuracy-baseline/runs.parquet \
+		$(OUT)/accuracy-baseline/summary.json $(ACCURACY_BASELINE)/
 
 # Fuzzed scenario files, each accepted one run for a short lap (minutes; not in make test).
 fuzz: install

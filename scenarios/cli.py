@@ -18,13 +18,13 @@ import os
 import sys
 from collections.abc import Sequence
 
-from scenarios.commands import evaluate, replay, run, tune
+from scenarios.commands import campaign, compare, evaluate, replay, run, tune
 from scenarios.process.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, InputError
 from semistatic.errors import SpecError
 
 __all__ = ["console_main", "main"]
 
-COMPILING_COMMANDS = ("run", "table", "tune", "replay", "evaluate")
+COMPILING_COMMANDS = ("run", "table", "tune", "replay", "evaluate", "campaign")
 """Commands that run the mapper: its kernels are compiled (on every core) before them."""
 
 
@@ -40,6 +40,8 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_parser(commands)
     tune.add_parser(commands)
     evaluate.add_parser(commands)
+    campaign.add_parser(commands)
+    compare.add_parser(commands)
     return parser
 
 
@@ -53,10 +55,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ...
     0
     """
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
+    args.argv = argv  # the command as given, for the manifests that record it
     handlers = {"check": run.main_check, "run": run.main_run, "table": run.main_table,
                 "replay": replay.main_replay, "tune": tune.main_tune,
-                "evaluate": evaluate.main_evaluate}
+                "evaluate": evaluate.main_evaluate, "campaign": campaign.main_campaign,
+                "compare": compare.main_compare}
     try:
         if args.command in COMPILING_COMMANDS:
             from semistatic.kernel_cache import warm_kernel_cache

@@ -47,10 +47,14 @@ from scenarios.bench.observer import Observer
 from scenarios.bench.records import ScanRecord
 from semistatic.frames import inverse, transform_points
 
-__all__ = ["KINDS", "SafetyRecord", "SafetyRecorder", "merged_record"]
+__all__ = ["INFRACTION_KINDS", "KINDS", "SafetyRecord", "SafetyRecorder", "merged_record"]
 
 KINDS = ("person", "box", "vehicle", "test_piece")
 """The objects whose separation from the vehicle is kept."""
+
+INFRACTION_KINDS = ("contact", "near_miss", "person_in_protective_while_moving",
+                    "unnecessary_stop")
+"""The kinds of infraction a run records (the module docstring says when)."""
 
 STANDSTILL = 0.01
 """Speed (m/s) under which a stopping vehicle counts as standing."""
@@ -95,7 +99,9 @@ class SafetyRecord:
 
     def infraction(self, kind: str, *, t: float, vehicle: str, lap: int,
                    where: tuple[float, float], detail: str) -> None:
-        """Add an infraction to the record."""
+        """Add an infraction (one of :data:`INFRACTION_KINDS`) to the record."""
+        if kind not in INFRACTION_KINDS:
+            raise ValueError(f"infraction: kind must be one of {INFRACTION_KINDS}, got {kind!r}")
         self.infractions.append({"t": round(float(t), 4), "vehicle": vehicle, "lap": int(lap),
                                  "kind": kind, "x": round(float(where[0]), 3),
                                  "y": round(float(where[1]), 3), "detail": detail})

@@ -126,12 +126,6 @@ def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
     return spec, scenario_world(spec)
 
 
-def _estimated_sim_time(spec, world) -> float:
-    from worlds.checks import build_spline
-
-    return spec.laps * build_spline(world.path).length / world.path.speed
-
-
 def _other_policies(spec) -> list[str]:
     """Return the bundled field policies other than the scenario's, in their order.
 
@@ -208,6 +202,7 @@ def main_run(args: argparse.Namespace) -> int:
     from scenarios.logs.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.logs.recording import ScanRecorder, check_new_recording_path
     from scenarios.results.outputs import summarize, write_outputs
+    from scenarios.spec.layout import estimated_sim_time
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     out = check_output_dir(args.out if args.out is not None else Path("results") / spec.name)
@@ -223,7 +218,7 @@ def main_run(args: argparse.Namespace) -> int:
     if args.record is not None:
         check_new_recording_path(args.record)
         scan_recorder = ScanRecorder()
-    total = _estimated_sim_time(spec, world)
+    total = estimated_sim_time(spec, world)
     with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
         log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder,
                            observers=(scan_recorder,) if scan_recorder else ())

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import time
 from collections.abc import Callable, Iterator
 
 from tqdm import tqdm
@@ -24,6 +25,22 @@ __all__ = ["SCANS_PER_LINE", "count_progress", "scan_progress", "sim_progress"]
 
 SCANS_PER_LINE = 500
 """Off a terminal, :func:`scan_progress` prints one line per this many scans."""
+
+
+def _duration(seconds: float) -> str:
+    """Return ``seconds`` as ``1 h 05 min``, ``4 min 10 s`` or ``12 s``.
+
+    Examples
+    --------
+    >>> _duration(3900), _duration(250), _duration(12.4)
+    ('1 h 05 min', '4 min 10 s', '12 s')
+    """
+    seconds = round(seconds)
+    if seconds >= 3600:
+        return f"{seconds // 3600} h {seconds % 3600 // 60:02d} min"
+    if seconds >= 60:
+        return f"{seconds // 60} min {seconds % 60:02d} s"
+    return f"{seconds} s"
 
 
 def _line(text: str) -> None:
@@ -71,14 +88,18 @@ def sim_progress(total: float, label: str, laps: int) -> Iterator[Callable[[floa
 def count_progress(total: int, label: str, unit: str) -> Iterator[Callable[[str], None]]:
     """Yield a callback to call with a short description as each of ``total`` items ends.
 
-    Off a terminal it prints ``label: K/total UNITs done (DESCRIPTION)`` per item.
+    Off a terminal it prints ``label: K/total UNITs done (DESCRIPTION; about T left)``
+    per item, T extrapolated from the time per item so far.
     """
     if not sys.stderr.isatty():
         done = [0]
+        start = time.monotonic()
 
         def report(what: str) -> None:
             done[0] += 1
-            _line(f"{label}: {done[0]}/{total} {unit}s done ({what})")
+            left = (time.monotonic() - start) / done[0] * (total - done[0])
+            eta = f"; about {_duration(left)} left" if done[0] < total else ""
+            _line(f"{label}: {done[0]}/{total} {unit}s done ({what}{eta})")
 
         yield report
         return

@@ -46,6 +46,7 @@ __all__ = [
     "is_result_dir",
     "remove_stale_staging",
     "stage_and_publish",
+    "write_atomic",
 ]
 
 RESULT_MARKER = ".semistatic-result"
@@ -53,6 +54,9 @@ RESULT_MARKER = ".semistatic-result"
 
 LEGACY_RESULT_FILES = ("metrics.json", "sweep.json", "table1.md")
 """Files that mark a result written before ``RESULT_MARKER`` existed."""
+
+FILE_MODE = 0o644
+"""File mode of a file written by :func:`write_atomic`: readable by all, as ``open`` makes it."""
 
 _LEFTOVER = re.compile(r"\.(?P<name>.+)\.(?P<kind>staging|previous)-(?P<pid>\d+)-[^.]+$")
 
@@ -172,3 +176,28 @@ def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
             os.rename(staging, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder, renamed.
+
+    Readers (and a later run after a kill) see the old file or the whole new one, never
+    a truncated one.
+
+    Examples
+    --------
+    >>> target = Path(tempfile.mkdtemp()) / "note.txt"
+    >>> write_atomic(target, "one")
+    >>> write_atomic(target, b"two")
+    >>> target.read_text(), [p.name for p in target.parent.iterdir()]
+    ('two', ['note.txt'])
+    """
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(data.encode() if isinstance(data, str) else data)
+        os.chmod(temporary, FILE_MODE)  # mkstemp makes its files private to the owner
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise

@@ -13,11 +13,11 @@ sim1         ours         3.10      1.20      5.00     1.00     0.50     2.00
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from scenarios.process.staging import write_atomic
 from scenarios.results.outputs import PAPER_TABLE1, TABLE1_COLUMNS
 from scenarios.spec.scenario import POLICIES
 
@@ -124,13 +124,6 @@ def _markdown(results: Mapping[str, Mapping[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    handle, temp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(handle, "w") as stream:
-        stream.write(text)
-    os.replace(temp, path)
-
-
 def write_table(results: Mapping[str, Mapping[str, Any]], out: str | os.PathLike[str]) -> None:
     """Write ``table1.csv`` (ours, the design page's columns) and ``table1.md`` (side by side)."""
     out = Path(out)
@@ -138,5 +131,5 @@ def write_table(results: Mapping[str, Mapping[str, Any]], out: str | os.PathLike
     csv_lines = [",".join(TABLE1_COLUMNS)]
     for name, metrics in results.items():
         csv_lines.append(",".join([name, *("" if v is None else f"{v}" for v in _ours(metrics))]))
-    _write_atomic(out / "table1.csv", "\n".join(csv_lines) + "\n")
-    _write_atomic(out / "table1.md", _markdown(results))
+    write_atomic(out / "table1.csv", "\n".join(csv_lines) + "\n")
+    write_atomic(out / "table1.md", _markdown(results))

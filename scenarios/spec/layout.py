@@ -39,7 +39,7 @@ from robots.presets import PRESETS, UGVSpec, get_preset
 from scenarios.spec.scenario import BoxMove, ScenarioSpec
 from semistatic.errors import MEMORY, SpecError
 from semistatic.validation import FILE_KEY, did_you_mean
-from worlds.checks import Clearances, LayoutProblem, layout_problems
+from worlds.checks import Clearances, LayoutProblem, build_spline, layout_problems
 from worlds.load import load_world
 from worlds.spec import BoxSpec, WorldSpec
 
@@ -48,6 +48,7 @@ __all__ = [
     "check_moves",
     "check_scenario_layout",
     "enable_people",
+    "estimated_sim_time",
     "lap_worlds",
     "robot_footprint",
     "robot_preset",
@@ -195,6 +196,22 @@ def scenario_world(spec: ScenarioSpec) -> WorldSpec:
     ('pal3', ['walker'])
     """
     return enable_people(_load_world(spec), spec.people, file=spec.source)
+
+
+def estimated_sim_time(spec: ScenarioSpec, world: WorldSpec | None = None) -> float:
+    """Return about how long (simulated s) ``spec`` drives: its laps of the path at speed.
+
+    Stops and slowdowns make a run longer; progress bars and the order of a campaign's
+    runs (longest first) need no more than this.
+
+    Examples
+    --------
+    >>> from scenarios.spec.load import load_scenario
+    >>> round(estimated_sim_time(load_scenario("pal1", overrides=["laps=2"])))
+    55
+    """
+    world = scenario_world(spec) if world is None else world
+    return spec.laps * build_spline(world.path).length / world.path.speed
 
 
 def lap_worlds(spec: ScenarioSpec, *, world: WorldSpec | None = None) -> tuple[WorldSpec, ...]:

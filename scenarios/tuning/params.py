@@ -167,13 +167,9 @@ def parse_params(texts: Iterable[str]) -> tuple[SearchParam, ...]:
     >>> [p.key for p in parse_params(["mapper.gate=0.1:0.2", "policy=conservative,adaptive"])]
     ['mapper.gate', 'policy']
     """
-    params: dict[str, SearchParam] = {}
-    for text in texts:
-        param = parse_param(text)
-        if param.key in params:
-            raise SpecError(PARAM_OPTION, param.key, "given twice; keep one --param per key")
-        params[param.key] = param
-    return tuple(params.values())
+    from scenarios.tuning.points import once_per_key
+
+    return once_per_key(map(parse_param, texts), PARAM_OPTION)
 
 
 def grid_size(params: Sequence[SearchParam], points: int) -> int:

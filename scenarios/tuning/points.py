@@ -36,6 +36,7 @@ __all__ = [
     "SEEDS_OPTION",
     "SweepPoint",
     "display_value",
+    "once_per_key",
     "parse_grid",
     "parse_grids",
     "parse_seeds",
@@ -136,6 +137,25 @@ def parse_grids(texts: Iterable[str]) -> dict[str, tuple[Any, ...]]:
             )
         grids[key] = values
     return grids
+
+
+def once_per_key(items: Iterable[Any], option: str) -> tuple[Any, ...]:
+    """Return ``items`` (each with a ``key``), refusing a key given twice to ``option``.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as Item
+    >>> once_per_key([Item(key="a"), Item(key="a")], "--param")
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --param: a: given twice; keep one --param per key
+    """
+    by_key: dict[str, Any] = {}
+    for item in items:
+        if item.key in by_key:
+            raise SpecError(option, item.key, f"given twice; keep one {option} per key")
+        by_key[item.key] = item
+    return tuple(by_key.values())
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:

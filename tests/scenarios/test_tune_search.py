@@ -1,13 +1,10 @@
 """``semistatic tune --param``: parameters, bad input, Pareto front, resume after SIGKILL, Ray."""
 
 import json
-import os
 import re
-import signal
 import sqlite3
 import subprocess
 import sys
-import time
 
 import optuna
 import pytest
@@ -17,7 +14,7 @@ from scenarios.tuning.metrics import TIMING_COLUMNS
 from scenarios.tuning.params import parse_param, parse_params
 from scenarios.tuning.run import PoolBackend, RayBackend
 from semistatic.errors import SpecError
-from tests.scenarios.cli_helpers import assert_one_error_line, run_cli
+from tests.scenarios.cli_helpers import assert_one_error_line, kill_after_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
 
 KILL_AFTER = 3
@@ -161,15 +158,7 @@ def _search_command(scenario, out):
 def test_a_search_killed_after_three_trials_resumes_without_rerunning_them(tiny, tmp_path):
     out = tmp_path / "out"
     command = _search_command(tiny, out)
-    process = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + START_TIMEOUT_S
-    for line in process.stderr:
-        if f"{KILL_AFTER}/{TRIALS} trials done" in line:
-            break
-        assert time.monotonic() < deadline, "the search did not finish 3 trials in time"
-    os.kill(process.pid, signal.SIGKILL)
-    process.wait()
+    kill_after_line(command, tmp_path, f"{KILL_AFTER}/{TRIALS} trials done", START_TIMEOUT_S)
     killed = _finished(out / "study.db")
     complete_before = [row for row in killed if row[1] == "COMPLETE"]
     assert len(complete_before) >= KILL_AFTER

@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+from scenarios.results.figures.campaign import plot_metric_distributions, plot_table1_intervals
 from scenarios.results.figures.ekf import plot_ekf_corrections
 from scenarios.results.figures.laps import plot_detection_scores, plot_lap_times
 from scenarios.results.figures.polygonal_map import plot_polygonal_map
@@ -32,8 +33,10 @@ __all__ = [
     "plot_detection_scores",
     "plot_ekf_corrections",
     "plot_lap_times",
+    "plot_metric_distributions",
     "plot_polygonal_map",
     "plot_replay_map",
     "plot_sharing_traffic",
+    "plot_table1_intervals",
     "plot_tangent_histograms",
 ]

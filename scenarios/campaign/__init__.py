@@ -1,0 +1,1 @@
+"""Campaigns: many seeds, policies and sampled variations; tables, statistics, comparison."""
