@@ -19,6 +19,9 @@ CLOSED_LOOP_DOCTESTS = {
     "scenarios.bench.testbench.Testbench",
     "scenarios.bench.sharing",
     "scenarios.bench.runner.run_scenario",
+    "scenarios.bench.saved_state",
+    "scenarios.bench.saved_state.SavedStates.save_state",
+    "scenarios.tuning.warm",
     "scenarios.results.emergence",
     "scenarios.results.stopping",
 }

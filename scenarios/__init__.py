@@ -3,15 +3,17 @@
 The wings, lowest first: :mod:`scenarios.process` (worker pools, progress, staged
 outputs), :mod:`scenarios.spec` (scenario data), :mod:`scenarios.bench` (the closed loop),
 :mod:`scenarios.results` (metrics, outputs, Table 1, figures), :mod:`scenarios.logs` (real
-logs, recordings, bags) and :mod:`scenarios.tuning`; each imports only those before it.
+logs, recordings, bags), :mod:`scenarios.tuning` (sweeps, searches, warm starts),
+:mod:`scenarios.campaign` (many seeds and variations, comparisons) and
+:mod:`scenarios.falsify` (searching for failures); each imports only those before it.
 What a script needs is importable from here.
 
 Examples
 --------
 >>> from scenarios import bundled_scenarios, load_scenario
->>> bundled_scenarios()
-('occlusion_hall', 'pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet', \
-'warehouse_occlusion')
+>>> bundled_scenarios()  # doctest: +NORMALIZE_WHITESPACE
+('fault_blind_policy', 'fault_short_field', 'fault_slow_scanner', 'occlusion_hall', 'pal1',
+ 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet', 'warehouse_occlusion')
 >>> load_scenario("pal3b").people
 ('walker',)
 """

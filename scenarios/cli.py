@@ -18,13 +18,13 @@ import os
 import sys
 from collections.abc import Sequence
 
-from scenarios.commands import campaign, compare, evaluate, replay, run, tune
+from scenarios.commands import campaign, compare, evaluate, falsify, replay, run, tune
 from scenarios.process.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, InputError
 from semistatic.errors import SpecError
 
 __all__ = ["console_main", "main"]
 
-COMPILING_COMMANDS = ("run", "table", "tune", "replay", "evaluate", "campaign")
+COMPILING_COMMANDS = ("run", "table", "tune", "replay", "evaluate", "campaign", "falsify")
 """Commands that run the mapper: its kernels are compiled (on every core) before them."""
 
 
@@ -42,6 +42,7 @@ def _parser() -> argparse.ArgumentParser:
     evaluate.add_parser(commands)
     campaign.add_parser(commands)
     compare.add_parser(commands)
+    falsify.add_parser(commands)
     return parser
 
 
@@ -61,7 +62,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handlers = {"check": run.main_check, "run": run.main_run, "table": run.main_table,
                 "replay": replay.main_replay, "tune": tune.main_tune,
                 "evaluate": evaluate.main_evaluate, "campaign": campaign.main_campaign,
-                "compare": compare.main_compare}
+                "compare": compare.main_compare, "falsify": falsify.main_falsify}
     try:
         if args.command in COMPILING_COMMANDS:
             from semistatic.kernel_cache import warm_kernel_cache

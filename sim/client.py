@@ -29,6 +29,7 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from types import TracebackType
 
 _LIBC = ctypes.CDLL(None)
@@ -65,7 +66,7 @@ with quiet_stdout():
     import pybullet
     from pybullet_utils.bullet_client import BulletClient
 
-__all__ = ["DEFAULT_TIME_STEP", "GRAVITY", "SimClient"]
+__all__ = ["DEFAULT_TIME_STEP", "GRAVITY", "PhysicsState", "SimClient"]
 
 DEFAULT_TIME_STEP = 1.0 / 240.0
 """PyBullet's native step (s); its contact and solver defaults are tuned for it."""
@@ -76,6 +77,19 @@ GRAVITY = 9.81
 # Projected Gauss-Seidel iterations per step. PyBullet's default (50) keeps the wheel
 # contacts converged at 240 Hz; fewer iterations let the velocity motors creep.
 _SOLVER_ITERATIONS = 50
+
+
+@dataclass(frozen=True)
+class PhysicsState:
+    """A physics state kept in the server's memory (:meth:`SimClient.save_state`).
+
+    ``state_id`` is PyBullet's handle; ``steps`` and ``engine_time_s`` are the client's
+    clock and engine time when it was saved.
+    """
+
+    state_id: int
+    steps: int
+    engine_time_s: float
 
 
 class SimClient:
@@ -210,6 +224,45 @@ class SimClient:
             yield
         finally:
             self.engine_time_s += time.perf_counter() - start
+
+    def save_state(self) -> PhysicsState:
+        """Keep the bodies' poses, velocities and contacts, and the clock, in memory.
+
+        :meth:`restore_state` goes back to it (as often as wanted) while the world holds
+        the same bodies; :meth:`remove_state` frees it. Motor targets are not part of it
+        (PyBullet's ``saveState``): whoever set them sets them again.
+
+        Examples
+        --------
+        >>> with SimClient() as sim:
+        ...     ball = sim.bullet.createMultiBody(
+        ...         baseMass=1.0, basePosition=[0.0, 0.0, 1.0],
+        ...         baseCollisionShapeIndex=sim.bullet.createCollisionShape(
+        ...             sim.bullet.GEOM_SPHERE, radius=0.1))
+        ...     state = sim.save_state()
+        ...     sim.step(100)
+        ...     fallen = sim.bullet.getBasePositionAndOrientation(ball)[0]
+        ...     sim.restore_state(state)
+        ...     again = sim.bullet.getBasePositionAndOrientation(ball)[0]
+        ...     sim.step(100)
+        ...     sim.remove_state(state)
+        ...     again, sim.bullet.getBasePositionAndOrientation(ball)[0] == fallen, sim.steps
+        ((0.0, 0.0, 1.0), True, 100)
+        """
+        self._require_open()
+        return PhysicsState(int(self.bullet.saveState()), self._steps, self.engine_time_s)
+
+    def restore_state(self, state: PhysicsState) -> None:
+        """Go back to ``state`` (:meth:`save_state`): bodies, contacts, clock, engine time."""
+        self._require_open()
+        self.bullet.restoreState(stateId=state.state_id)
+        self._steps = state.steps
+        self.engine_time_s = state.engine_time_s
+
+    def remove_state(self, state: PhysicsState) -> None:
+        """Free the memory of ``state``; it cannot be restored any more."""
+        self._require_open()
+        self.bullet.removeState(state.state_id)
 
     def close(self) -> None:
         """Disconnect the physics server; calling it again does nothing."""

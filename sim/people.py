@@ -12,6 +12,7 @@ A ``per_lap`` person's clock restarts with every lap (``update(t, lap_start=...)
 crosses the path at the same point of every lap; other people follow the run's clock. A
 person whose walk a vehicle triggers (``PersonSpec.trigger``) stands at its first
 waypoint until the caller says when the trigger fired (``update(..., triggered=...)``).
+A person limited to some ``laps`` is parked in the others (``update(..., lap=...)``).
 
 Examples
 --------
@@ -34,10 +35,23 @@ import numpy as np
 
 from worlds.spec import PersonSpec
 
-__all__ = ["PARKED_Z", "People", "Walk", "person_position"]
+__all__ = ["PARKED_Z", "People", "Walk", "parked_place", "person_position"]
 
 PARKED_Z = -50.0
 """Height (m) of the body frame of a person who is not in the scene (below the floor)."""
+
+
+def parked_place(person: PersonSpec) -> tuple[float, float, float]:
+    """Return where ``person``'s body waits out of the scene: below its first waypoint.
+
+    Examples
+    --------
+    >>> from worlds.spec import PersonSpec
+    >>> parked_place(PersonSpec("ann", ((1.0, 2.0), (3.0, 2.0))))
+    (1.0, 2.0, -50.0)
+    """
+    x, y = person.waypoints[0]
+    return (float(x), float(y), PARKED_Z)
 
 
 def person_position(person: PersonSpec, t: float) -> np.ndarray | None:
@@ -130,6 +144,15 @@ class People:
     ...     people = People(SimWorld(sim, spec))
     ...     people.update(12.0, lap_start=10.0)["ann"].tolist()
     [2.0, 0.0]
+
+    A person limited to lap 2 is parked in lap 1:
+
+    >>> import dataclasses
+    >>> late = PersonSpec("ann", ((0.0, 0.0), (4.0, 0.0)), laps=(2,))
+    >>> with SimClient() as sim:
+    ...     people = People(SimWorld(sim, dataclasses.replace(spec, people=(late,))))
+    ...     people.update(12.0, lap_start=10.0, lap=1), people.update(12.0, 10.0, lap=2)
+    ({'ann': None}, {'ann': array([2., 0.])})
     """
 
     def __init__(self, world) -> None:
@@ -142,20 +165,29 @@ class People:
         self._upright = self._bullet.getQuaternionFromEuler([0.0, 0.0, 0.0])
         # Where each body was last put (None: not yet, so the first update places all).
         self._placed: dict[str, tuple[float, float, float] | None] = dict.fromkeys(self._ids)
+        # Built at its first waypoint, a person who sits out lap 1 would stand there while
+        # the robot settles and re-localises before the first tick: park it now.
+        for walk in self._walks:
+            if not walk.person.acts_in(1):
+                self._park(walk.person)
 
     def update(self, t: float, lap_start: float = 0.0,
-               triggered: Mapping[str, float | None] | None = None) -> dict[str, np.ndarray | None]:
+               triggered: Mapping[str, float | None] | None = None,
+               lap: int | None = None) -> dict[str, np.ndarray | None]:
         """Place every person where its route puts it at run time ``t``.
 
         ``lap_start`` is the run time at which the current lap began (the clock of
         ``per_lap`` people). ``triggered`` gives, for people a vehicle triggers, the run
         time their trigger fired (``None``: not yet; they stand at their first waypoint).
-        Returns ``{name: (x, y) or None}``, ``None`` for people not yet in the scene.
+        ``lap`` (from 1) parks the people whose ``laps`` leave it out (``None``: none).
+        Returns ``{name: (x, y) or None}``, ``None`` for people not in the scene.
         """
         positions: dict[str, np.ndarray | None] = {}
         for walk in self._walks:
             person = walk.person
-            if person.trigger != "time":
+            if lap is not None and not person.acts_in(lap):
+                xy = None
+            elif person.trigger != "time":
                 fired = (triggered or {}).get(person.name)
                 # Waiting for the trigger, then its delay: standing at the first waypoint.
                 xy = walk.position(person.start_time if fired is None
@@ -165,7 +197,7 @@ class People:
                 xy = walk.position(clock)
             if xy is None:
                 positions[person.name] = None
-                xyz = (float(person.waypoints[0][0]), float(person.waypoints[0][1]), PARKED_Z)
+                xyz = parked_place(person)
             else:
                 positions[person.name] = np.array(xy)
                 xyz = (xy[0], xy[1], 0.0)  # body frames sit on the floor
@@ -177,3 +209,22 @@ class People:
                 self._sim.engine_time_s += time.perf_counter() - start
                 self._placed[person.name] = xyz
         return positions
+
+    def _park(self, person: PersonSpec) -> None:
+        place = parked_place(person)
+        self._bullet.resetBasePositionAndOrientation(self._ids[person.name], place, self._upright)
+        self._placed[person.name] = place
+
+    def refresh(self) -> None:
+        """Take up the world's people anew (after ``SimWorld.replace_people``).
+
+        Each person walks its new route from the next update; a parked person whose
+        parked place changed (a new first waypoint) is moved there now, so the bodies
+        stand where a world built with the new people would have parked them.
+        """
+        self._walks = [Walk(person) for person in self.world.people]
+        for walk in self._walks:
+            name, place = walk.person.name, parked_place(walk.person)
+            placed = self._placed[name]
+            if placed is not None and placed[2] == PARKED_Z and placed != place:
+                self._park(walk.person)

@@ -294,6 +294,47 @@ class SimWorld:
         """Return the body id of the person called ``name``."""
         return self.body_id(name)
 
+    def replace_people(self, people: tuple[PersonSpec, ...]) -> None:
+        """Give the built people new specs: walks, triggers and remissions (bodies stay).
+
+        ``people`` must name the same people, in the same order, with the same
+        ``enabled``, ``radius`` and ``height`` (their bodies); anything else raises
+        ``ValueError``. Call ``sim.people.People.refresh`` after it.
+
+        Examples
+        --------
+        >>> from sim.client import SimClient
+        >>> from worlds.spec import PathSpec, PersonSpec, SegmentSpec, WorldSpec
+        >>> field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+        >>> path = PathSpec([(0.0, 0.0), (1.0, 0.0)], [SegmentSpec("a", 0, 1, field, field)])
+        >>> ann = PersonSpec("ann", ((0.0, 0.0), (4.0, 0.0)))
+        >>> spec = WorldSpec(name="p", walls=(), posts=(), boxes=(), people=(ann,), path=path)
+        >>> sim = SimClient()
+        >>> world = SimWorld(sim, spec)
+        >>> world.replace_people((replace(ann, speed=2.0, remission=0.9),))
+        >>> world.people[0].speed, world.remission_of([world.person_id("ann")]).tolist()
+        (2.0, [0.9])
+        >>> world.replace_people((replace(ann, radius=0.3),))
+        Traceback (most recent call last):
+        ...
+        ValueError: person ann: its body is built (name, enabled, radius, height); only its \
+walk and remission can change
+        >>> sim.close()
+        """
+        people = tuple(people)
+        body = ("name", "enabled", "radius", "height")
+        old = self.spec.people
+        if len(people) != len(old):
+            raise ValueError(f"replace_people: the world has {len(old)} people, got {len(people)}")
+        for before, after in zip(old, people, strict=True):
+            if any(getattr(before, key) != getattr(after, key) for key in body):
+                raise ValueError(f"person {before.name}: its body is built ({', '.join(body)}); "
+                                 "only its walk and remission can change")
+        self.spec = replace(self.spec, people=people)
+        for person in self.spec.active_people:
+            info = replace(self._info[self._ids_by_name[person.name]], remission=person.remission)
+            self._register(self._ids_by_name[person.name], info)
+
     def info(self, body_id: int) -> BodyInfo:
         """Return the ``BodyInfo`` of ``body_id`` (``unknown`` for bodies not built here)."""
         info = self._info.get(int(body_id))

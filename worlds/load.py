@@ -16,7 +16,8 @@ Examples
 Traceback (most recent call last):
 ...
 semistatic.errors.SpecError: sim_1: <file>: not a bundled world (did you mean 'sim1'?) \
-and no such file; bundled worlds: occlusion_hall, pal1, pal3, sim1, sim2, warehouse
+and no such file; bundled worlds: fault_hall, fault_hall_pallet, fault_hall_short, occlusion_hall, \
+pal1, pal3, sim1, sim2, warehouse
 """
 
 from __future__ import annotations
@@ -38,8 +39,9 @@ def bundled_worlds() -> tuple[str, ...]:
 
     Examples
     --------
-    >>> bundled_worlds()
-    ('occlusion_hall', 'pal1', 'pal3', 'sim1', 'sim2', 'warehouse')
+    >>> bundled_worlds()  # doctest: +NORMALIZE_WHITESPACE
+    ('fault_hall', 'fault_hall_pallet', 'fault_hall_short', 'occlusion_hall', 'pal1', 'pal3',
+     'sim1', 'sim2', 'warehouse')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 

@@ -36,6 +36,7 @@ semistatic.errors.SpecError: <memory>: radius: must be > 0.0 and <= 2.0, got -1.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -96,6 +97,9 @@ PATH_SPEED = bounds(gt=0.0, le=2.0)
 """Nominal path speed (m/s): industrial vehicles drive up to about 2 m/s."""
 
 START_TIME = bounds(ge=0.0, le=86_400.0)
+
+LAP_NUMBER = bounds(ge=1, le=1000)
+"""A lap of a run, counted from 1 (scenarios run at most 1000 laps)."""
 
 
 def _set(obj: object, name: str, value: Any) -> None:
@@ -381,6 +385,9 @@ class PersonSpec:
     the last waypoint and stays there (or loops back to the first when ``loop``); a
     ``per_lap`` person starts again with every lap. A world may carry people that are off
     (``enabled = false``) for scenarios to switch on with :meth:`WorldSpec.enable_people`.
+    A person with ``laps`` acts only in those laps (counted from 1): in the others it is
+    not in the scene (parked below the floor, as before its start), its trigger does not
+    fire and it counts in no separation, contact or score.
 
     Parameters
     ----------
@@ -415,12 +422,26 @@ class PersonSpec:
         Where across the vehicle's front the ``meet`` trigger aims (0 right, 1 left).
     dwell
         Seconds the person stands at each waypoint (empty: walks on; else one per waypoint).
+    laps
+        The laps (from 1, ascending) in which the person acts (empty: every lap).
 
     Examples
     --------
     >>> walker = PersonSpec("walker", waypoints=[(0, -2), (0, 2)], speed=1.0)
     >>> walker.path_length
     4.0
+    >>> late = PersonSpec("late", waypoints=[(0, -2), (0, 2)], laps=[3])
+    >>> late.laps, late.acts_in(2), late.acts_in(3), walker.acts_in(2)
+    ((3,), False, True, True)
+    >>> PersonSpec("late", waypoints=[(0, -2), (0, 2)], laps=[3, 2])
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: laps: must list laps in ascending order, each once, \
+got [3, 2]
+    >>> PersonSpec("late", waypoints=[(0, -2), (0, 2)], laps=[0])
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: laps[0]: must be >= 1 and <= 1000, got 0
     """
 
     name: str = field(metadata=safe_name())
@@ -438,9 +459,13 @@ class PersonSpec:
     trigger_distance: float = field(default=2.0, metadata=bounds(ge=0.0, le=100.0))
     meet_at: float = field(default=0.5, metadata=UNIT_INTERVAL)
     dwell: tuple[float, ...] = field(default=(), metadata=START_TIME)
+    laps: tuple[int, ...] = field(default=(), metadata=LAP_NUMBER)
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if any(later <= earlier for earlier, later in itertools.pairwise(self.laps)):
+            raise SpecError(MEMORY, "laps", "must list laps in ascending order, each once, "
+                            f"got {list(self.laps)}")
         if not self.waypoints:
             raise SpecError(MEMORY, "waypoints", "needs at least 1 waypoint, got none")
         if self.trigger not in TRIGGERS:
@@ -455,6 +480,10 @@ class PersonSpec:
         if self.trigger != "time" and len(self.waypoints) < 2:
             raise SpecError(MEMORY, "waypoints", f"trigger '{self.trigger}' needs a walk "
                             "(two waypoints or more) that crosses the vehicle's path")
+
+    def acts_in(self, lap: int) -> bool:
+        """Return whether the person is in the scene in lap ``lap`` (from 1)."""
+        return not self.laps or lap in self.laps
 
     @property
     def path_length(self) -> float:

@@ -10,6 +10,12 @@ with the segment's supplements, :mod:`scenarios.spec.field_sizing`): ahead, besi
 behind the vehicle. With ``"fixed"`` it is the first ``safety.min_protective_depth`` of
 the segment's protective field, which a scenario may use to show what that misses.
 
+Two seeded faults (:class:`~scenarios.spec.scenario.Faults`) act here:
+``faults.unguarded_minimum_field`` stops counting the minimum field's readings (the policy
+alone decides), and ``faults.scanner_latency_s`` holds each of the supervisor's answers
+back that many seconds (whole safety scans) before it reaches the vehicle
+(:meth:`VehicleFields.reaching_vehicle`).
+
 Examples
 --------
 >>> from robots.presets import PIONEER3DX
@@ -23,6 +29,8 @@ Examples
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 import shapely
@@ -85,12 +93,18 @@ class VehicleFields:
         self._walls = tuple(wall.corners() for wall in route.walls)
         self._travelled = 0.0  # forward travel (m, encoders) since the last safety scan
         self._since = 0.0      # ... and that scan's time
+        faults = spec.faults
+        self._guarded = not faults.unguarded_minimum_field
+        # The seeded latency in whole scans: the supervisor only answers at scans.
+        self._latency_scans = round(faults.scanner_latency_s * spec.rates.safety_hz)
+        self._pending: deque[SafetyOutput] = deque()
 
     def reset(self, segment: PathSegment, stamp: float) -> None:
         """Start a lap at rest on ``segment`` at time ``stamp``."""
         self.supervisor.reset()
         self.supervisor.set_fields(segment.fields)
         self._travelled, self._since = 0.0, stamp
+        self._pending.clear()
 
     def travel(self, forward: float) -> None:
         """Add an odometry increment's forward travel (m)."""
@@ -124,7 +138,8 @@ class VehicleFields:
         view = FieldView(points, segment, minimum, ekf_pose, local_map, self.settings,
                          self._walls)
         readings = checked_readings(policy, policy.counted_readings(view), len(points))
-        occupancy = counted_occupancy(points, segment.fields, minimum, readings,
+        occupancy = counted_occupancy(points, segment.fields,
+                                      minimum if self._guarded else None, readings,
                                       supervisor.policy.min_points)
         output = supervisor.update(occupancy, stamp)
         cap = policy.speed_cap(view)
@@ -134,6 +149,19 @@ class VehicleFields:
                                  f"got {cap!r}")
             return SafetyOutput(cap, output.zone)
         return output
+
+    def reaching_vehicle(self, output: SafetyOutput) -> SafetyOutput:
+        """Return the answer that reaches the vehicle now, ``output`` being the latest.
+
+        Without ``faults.scanner_latency_s`` that is ``output``; with it, the answer of
+        that many scans ago (clear while none is that old yet: the lap started at rest).
+        """
+        if not self._latency_scans:
+            return output
+        self._pending.append(output)
+        if len(self._pending) <= self._latency_scans:
+            return SafetyOutput(1.0, "clear")
+        return self._pending.popleft()
 
 
 def _first_depth(segment: PathSegment, depth: float) -> shapely.Geometry:

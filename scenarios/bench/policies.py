@@ -226,7 +226,7 @@ def checked_readings(policy: FieldPolicy, readings: object, count: int) -> Field
 def counted_occupancy(
     points: np.ndarray,
     fields: FieldSet,
-    minimum_field: shapely.Geometry,
+    minimum_field: shapely.Geometry | None,
     readings: FieldReadings | None,
     min_points: int,
 ) -> FieldState:
@@ -237,7 +237,8 @@ def counted_occupancy(
     before it stands, :func:`robots.stopping.minimum_protective_field`), wherever that
     is: a policy can shrink a field, it cannot configure the stop away, and a field drawn
     too short or too narrow does not hide what stands beside or just ahead of the
-    vehicle.
+    vehicle. ``minimum_field = None`` drops that rule: only the seeded fault
+    ``faults.unguarded_minimum_field`` (:class:`~scenarios.spec.scenario.Faults`) does.
 
     Examples
     --------
@@ -249,8 +250,13 @@ def counted_occupancy(
     FieldState(warning_count=2, protective_count=2, min_points=1)
     >>> counted_occupancy(points, fields, minimum, None, 1)
     FieldState(warning_count=4, protective_count=3, min_points=1)
+    >>> counted_occupancy(points, fields, None, FieldReadings(nothing, nothing), 1)
+    FieldState(warning_count=0, protective_count=0, min_points=1)
     """
-    must_stop = points_inside(minimum_field, points)
+    if minimum_field is None:
+        must_stop = np.zeros(len(points), dtype=bool)
+    else:
+        must_stop = points_inside(minimum_field, points)
     warning = points_inside(fields.warning_polygon, points)
     protective = points_inside(fields.protective_polygon, points)
     if readings is not None:

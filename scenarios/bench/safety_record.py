@@ -202,7 +202,15 @@ class SafetyRecorder(Observer):
         radii = self._radii
         local = transform_points(inverse(pose), np.array([xy for _, xy in people], dtype=float))
         distances = shapely.distance(self._footprint, shapely.points(local))
-        speed = float(vehicle.true_twist[0])
+        # The true twist costs an engine query and a cross product: asked only when a
+        # person is near or inside (with a person in the scene it was a third of a tick).
+        twist: list[float] = []
+
+        def speed() -> float:
+            if not twist:
+                twist.append(float(vehicle.true_twist[0]))
+            return twist[0]
+
         field = vehicle.segment.fields.protective_polygon
         settings = vehicle.spec.safety
         for (name, xy), centre, distance in zip(people, local, distances, strict=True):
@@ -217,15 +225,15 @@ class SafetyRecorder(Observer):
                     self.record.infraction(
                         "near_miss", t=t, vehicle=vehicle.name, lap=lap, where=where,
                         detail=f"person {name} {separation:.3f} m from the vehicle at "
-                               f"{speed:.2f} m/s")
+                               f"{speed():.2f} m/s")
             elif separation > 1.5 * settings.near_miss_distance:
                 self._near.discard(name)
             inside = shapely.distance(field, shapely.Point(centre)) <= radii[name]
-            if inside and abs(speed) > settings.creep_speed:
-                since, entry_speed = self._inside_since.setdefault(name, (t, abs(speed)))
+            if inside and abs(speed()) > settings.creep_speed:
+                since, entry_speed = self._inside_since.setdefault(name, (t, abs(speed())))
                 late = t - since - self.response_time
                 expected = entry_speed - self.deceleration * max(0.0, late)
-                if late > 0.0 and abs(speed) > expected + BRAKING_SLACK \
+                if late > 0.0 and abs(speed()) > expected + BRAKING_SLACK \
                         and name not in self._reported_inside:
                     self._reported_inside.add(name)
                     self.record.infraction(
@@ -233,7 +241,7 @@ class SafetyRecorder(Observer):
                         lap=lap, where=where,
                         detail=f"person {name} in the protective field of segment "
                                f"{vehicle.segment.name} for {t - since:.2f} s at "
-                               f"{speed:.2f} m/s")
+                               f"{speed():.2f} m/s")
             else:
                 self._inside_since.pop(name, None)
                 self._reported_inside.discard(name)

@@ -32,7 +32,7 @@ from sim.client import SimClient
 from sim.people import People
 from sim.random_streams import RandomStreams
 from sim.world_builder import SimWorld
-from worlds.spec import BoxSpec, WorldSpec
+from worlds.spec import BoxSpec, PersonSpec, WorldSpec
 
 __all__ = ["Scene"]
 
@@ -99,12 +99,29 @@ class Scene:
         self._people = People(self.world) if self.world.people else None
         self._triggers = PersonTriggers(self.world.people, self.fleet) if self._people else None
 
-    def walk_people(self, lap_start: float) -> None:
-        """Move the people to where they are now (their walks restart with each lap)."""
+    def walk_people(self, lap_start: float, lap: int | None = None) -> None:
+        """Move the people to where they are now (their walks restart with each lap).
+
+        ``lap`` (from 1) keeps the people whose ``laps`` leave it out parked.
+        """
         if self._people is not None:
             t = self.sim.sim_time
-            fired = self._triggers.update(t, lap_start) if self._triggers else None
-            self.person_positions = self._people.update(t, lap_start=lap_start, triggered=fired)
+            fired = self._triggers.update(t, lap_start, lap) if self._triggers else None
+            self.person_positions = self._people.update(t, lap_start=lap_start, triggered=fired,
+                                                        lap=lap)
+
+    def replace_people(self, people: tuple[PersonSpec, ...]) -> None:
+        """Go on with new specs of the world's people (same bodies; new walks and triggers).
+
+        ``people`` are the world's people (``WorldSpec.people``) with the same names,
+        ``enabled``, ``radius`` and ``height`` (``SimWorld.replace_people`` checks).
+        A parked person whose first waypoint moved is parked below the new one.
+        """
+        self.world.replace_people(people)
+        if self._people is not None:
+            self._people.refresh()
+        if self._triggers is not None:
+            self._triggers.replace_people(self.world.people)
 
     def move_box(self, name: str, pose: tuple[float, float, float]) -> None:
         """Teleport box ``name`` to ``pose`` = (x, y, yaw)."""

@@ -50,6 +50,7 @@ from scenarios.bench.observer import Observer, require_observer
 from scenarios.bench.policies import FieldPolicy
 from scenarios.bench.records import LapLog, RunLog, combine_logs
 from scenarios.bench.safety_record import SafetyRecorder
+from scenarios.bench.saved_state import SavedStates
 from scenarios.bench.scene import Scene
 from scenarios.bench.scoring import GroundTruthScoring, Table1Reference
 from scenarios.bench.sharing import SegmentPublisher
@@ -75,7 +76,7 @@ def _of_lead(name: str, doc: str) -> property:
     return property(lambda bench: getattr(bench.fleet[0], name), doc=doc)
 
 
-class Testbench:
+class Testbench(SavedStates):
     """A scenario's closed loop with an explicit life cycle, state to read and observers.
 
     Parameters
@@ -252,7 +253,7 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         """
         if self._sim is None or self.done:
             self._require_running()  # raises
-        self.scene.walk_people(self.fleet[0].lap_log.start_time)
+        self.scene.walk_people(self.fleet[0].lap_log.start_time, self.fleet[0].lap_log.lap)
         self._sense_and_command()
         self._sim.step()
         self._after_physics()

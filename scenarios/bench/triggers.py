@@ -13,8 +13,9 @@ progress with it.
   sooner than the person walking there: the walk meets the vehicle's front at
   ``meet_at`` of its width (Euro NCAP's timing of pedestrian targets).
 
-A ``per_lap`` person's trigger re-arms when the lap starts. The vehicle's progress and
-path speed are what the vehicle itself knows (its follower); the geometry is the world's.
+A ``per_lap`` person's trigger re-arms when the lap starts; a person limited to some
+``laps`` fires only in those. The vehicle's progress and path speed are what the vehicle
+itself knows (its follower); the geometry is the world's.
 
 Examples
 --------
@@ -106,8 +107,15 @@ class PersonTriggers:
     """
 
     def __init__(self, people, fleet) -> None:
+        self._fleet = fleet
+        self._crossings = self._crossings_of(people)
+        self.fired: dict[str, float | None] = {c.person.name: None for c in self._crossings}
+        self._lap_start: float | None = None
+
+    def _crossings_of(self, people) -> list[Crossing]:
+        fleet = self._fleet
         vehicles = {vehicle.name: vehicle for vehicle in fleet}
-        self._crossings: list[Crossing] = []
+        crossings: list[Crossing] = []
         for person in people:
             if person.trigger == "time":
                 continue
@@ -117,15 +125,28 @@ class PersonTriggers:
                 raise ValueError(f"person {person.name}: no vehicle named "
                                  f"{person.trigger_vehicle!r} to trigger on")
             s, walk, sine, cosine = crossing_on_path(vehicle.path, person.waypoints)
-            self._crossings.append(Crossing(person, vehicle, s, walk, sine, cosine))
-        self.fired: dict[str, float | None] = {c.person.name: None for c in self._crossings}
-        self._lap_start: float | None = None
+            crossings.append(Crossing(person, vehicle, s, walk, sine, cosine))
+        return crossings
 
     def __bool__(self) -> bool:
         return bool(self._crossings)
 
-    def update(self, t: float, lap_start: float) -> dict[str, float | None]:
-        """Fire the triggers whose condition holds at run time ``t``; return every fire time."""
+    def replace_people(self, people) -> None:
+        """Watch for ``people`` from now on; a person's fire time this lap is kept.
+
+        For a run that goes on with new people (``SimWorld.replace_people``): the
+        crossings are found anew, the fire times of the people still triggered stay.
+        """
+        self._crossings = self._crossings_of(people)
+        self.fired = {c.person.name: self.fired.get(c.person.name) for c in self._crossings}
+
+    def update(self, t: float, lap_start: float, lap: int | None = None,
+               ) -> dict[str, float | None]:
+        """Fire the triggers whose condition holds at run time ``t``; return every fire time.
+
+        In lap ``lap`` (from 1), people whose ``laps`` leave it out do not fire (``None``:
+        every person may).
+        """
         if lap_start != self._lap_start:
             self._lap_start = lap_start
             for crossing in self._crossings:
@@ -134,6 +155,8 @@ class PersonTriggers:
         for crossing in self._crossings:
             person, vehicle = crossing.person, crossing.vehicle
             if self.fired[person.name] is not None or vehicle.done or vehicle.waiting:
+                continue
+            if lap is not None and not person.acts_in(lap):
                 continue
             front = float(np.asarray(vehicle.robot.footprint)[:, 0].max())
             ahead = crossing.s - (vehicle.follower.progress + front)

@@ -26,6 +26,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping
@@ -45,6 +46,7 @@ from scenarios.bench.policies import FieldPolicy
 from scenarios.bench.records import LapLog, RunLog, ScanRecord
 from scenarios.bench.scene import Scene
 from scenarios.bench.sensors import VehicleSensors
+from scenarios.spec.field_sizing import vehicle_deceleration
 from scenarios.spec.routes import fleet_frames
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments, segment_index
@@ -126,7 +128,15 @@ class Vehicle:
             [post.xy for post in posts],
             EKFParams(mount=tuple(robot.localization_laser.pose2d()), range_bias_sigma=bias_sigma),
         )
-        self.follower = ChainedFormFollower(path, FollowerParams(speed=route.path.speed))
+        follower = FollowerParams(speed=route.path.speed)
+        braking = spec.faults.braking_factor
+        if braking != 1.0:
+            # The seeded weak brakes: a share of the deceleration the field sizing assumes
+            # (the lower of the follower's and the motors' limits), which the follower's
+            # braking ramp then binds below the motors' limit.
+            follower = dataclasses.replace(
+                follower, max_deceleration=braking * vehicle_deceleration(robot, follower))
+        self.follower = ChainedFormFollower(path, follower)
         self.contacts = ContactMonitor(sim, self.body.body_id, world)
         self.fields = VehicleFields(spec, robot, route)
         self._local_maps = {
@@ -391,7 +401,10 @@ class Vehicle:
             self.lap_log.stopped_time_s += self._safety_dt
         elif output.zone == "warning":
             self.lap_log.slowed_time_s += self._safety_dt
-        self.speed_scale = output.speed_scale
+        # The zone is the scanner's decision, when it was taken (a stop's record starts
+        # there and so counts a seeded latency as travel); the speed scale is what has
+        # reached the follower by now.
+        self.speed_scale = self.fields.reaching_vehicle(output).speed_scale
         self._zone = output.zone
         if segment.name != self._mapped_segment:
             self._mapped_segment = segment.name

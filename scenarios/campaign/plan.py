@@ -66,6 +66,8 @@ class CampaignRun:
     values: tuple[tuple[str, Any], ...]
     spec: ScenarioSpec | None
     reason: str | None = None
+    overrides: tuple[str, ...] = ()
+    """The ``--set`` overrides that make the run of its scenario file (the seed aside)."""
 
     @property
     def status(self) -> str:
@@ -150,6 +152,9 @@ def scenario_digest(spec: ScenarioSpec) -> str:
     """
     fields = dataclasses.asdict(spec)
     fields.pop("source")
+    if not spec.faults.active():
+        # Fault-free runs keep the digests they had before faults existed.
+        fields.pop("faults")
     fields["world"] = hashlib.sha256(world_path(spec.world).read_bytes()).hexdigest()
     text = json.dumps(fields, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()
@@ -288,5 +293,6 @@ def plan_campaign(
                     if reason is None:
                         seeded = dataclasses.replace(spec, seed=int(seed))
                     runs.append(CampaignRun(run, name.name, policy, int(seed), index,
-                                            tuple(values.items()), seeded, reason))
+                                            tuple(values.items()), seeded, reason,
+                                            tuple(point)))
     return runs

@@ -34,18 +34,16 @@ import importlib.util
 import json
 from pathlib import Path
 
-from scenarios.process.errors import check_jobs
 from scenarios.process.staging import (
     RESULT_MARKER,
-    check_writable_parent,
-    is_result_dir,
+    check_resumable_dir,
     write_atomic,
 )
 from scenarios.spec.load import scenario_help
-from scenarios.tuning.run import BACKENDS
+from scenarios.tuning.run import BACKENDS, check_backend
 from semistatic.errors import SpecError
 
-__all__ = ["DEFAULT_SEEDS", "add_parser", "main_campaign", "parse_seed_range"]
+__all__ = ["DEFAULT_SEEDS", "add_parser", "main_campaign", "parse_seed_range", "split_policies"]
 
 DEFAULT_SEEDS = "0:9"
 MAX_RUNS = 100_000
@@ -139,35 +137,14 @@ def _definition(args: argparse.Namespace, scenarios, policies, seeds, variations
     }
 
 
-def _check_out(out: Path, definition: dict) -> bool:
-    """Return whether ``out`` holds this campaign to resume; raise if it cannot be used."""
-    from scenarios.campaign.table import KIND, MANIFEST_FILE
+def split_policies(text: str | None) -> list[str] | None:
+    """Return the policies of ``--policy P1,P2,...`` (``None`` when not given).
 
-    manifest_file = out / MANIFEST_FILE
-    if out.exists() and not out.is_dir():
-        raise SpecError("--out", str(out), "exists and is not a directory; choose a directory")
-    if out.is_dir() and manifest_file.is_file():
-        try:
-            manifest = json.loads(manifest_file.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            manifest = None
-        if not isinstance(manifest, dict) or manifest.get("kind") != KIND:
-            raise SpecError("--out", str(out), "holds a result that is not a campaign; choose "
-                            "a new or empty directory")
-        differs = [key for key, value in definition.items()
-                   if manifest.get("definition", {}).get(key) != value]
-        if differs:
-            raise SpecError("--out", str(out), f"holds another campaign (its {', '.join(differs)}"
-                            " differ); choose another --out, or delete it to start again")
-        return True
-    if out.is_dir() and any(out.iterdir()):
-        what = "a result of another command" if is_result_dir(out) else "files of yours"
-        raise SpecError("--out", str(out), f"holds {what}; choose a new or empty directory")
-    check_writable_parent(out / RESULT_MARKER if out.exists() else out, option="--out")
-    return False
-
-
-def _policies(text: str | None) -> list[str] | None:
+    Examples
+    --------
+    >>> split_policies("adaptive,guarded"), split_policies(None)
+    (['adaptive', 'guarded'], None)
+    """
     if text is None:
         return None
     policies = [policy.strip() for policy in text.split(",")]
@@ -182,11 +159,7 @@ def main_campaign(args: argparse.Namespace) -> int:
     from scenarios.spec.load import load_scenario
     from scenarios.tuning.study import split_scenarios
 
-    check_jobs(args.jobs)
-    if args.address is not None and args.backend != "ray":
-        raise SpecError("--address", args.address, "is a Ray address: add --backend ray")
-    if args.backend == "ray" and importlib.util.find_spec("ray") is None:
-        raise SpecError("--backend", "ray", "Ray is not installed: pip install 'semistatic[ray]'")
+    check_backend(args.backend, args.jobs, args.address)
     scenarios = split_scenarios(args.scenario)
     if len(set(scenarios)) != len(scenarios):
         raise SpecError("scenario", args.scenario, "a scenario is given twice")
@@ -195,7 +168,7 @@ def main_campaign(args: argparse.Namespace) -> int:
     if args.samples != 1 and not variations:
         raise SpecError("--samples", "samples", "nothing to sample: add --vary KEY=DIST")
     samples = draw_samples(variations, args.samples, seed=args.variation_seed)
-    policies = _policies(args.policy)
+    policies = split_policies(args.policy)
     if policies is None:  # the scenarios' own, in order
         policies = list(dict.fromkeys(load_scenario(s, overrides=args.overrides).policy
                                       for s in scenarios))
@@ -210,7 +183,10 @@ def main_campaign(args: argparse.Namespace) -> int:
     definition = _definition(args, scenarios, policies, seeds, variations)
     out = args.out if args.out is not None else Path("results") / (
         "campaign-" + "+".join(scenarios) if len("+".join(scenarios)) < 60 else "campaign")
-    resume = _check_out(out, definition)
+    from scenarios.campaign.table import KIND, MANIFEST_FILE
+
+    resume = check_resumable_dir(out, manifest=MANIFEST_FILE, kind=KIND, definition=definition,
+                                 noun="campaign")
     return _run(args, out, resume, definition, scenarios, policies, seeds, variations, samples)
 
 

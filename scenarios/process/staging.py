@@ -29,6 +29,7 @@ semistatic.errors.SpecError: --out: .../b.txt/deeper: cannot create it: .../b.tx
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -42,6 +43,7 @@ __all__ = [
     "LEGACY_RESULT_FILES",
     "RESULT_MARKER",
     "check_output_dir",
+    "check_resumable_dir",
     "check_writable_parent",
     "is_result_dir",
     "remove_stale_staging",
@@ -201,3 +203,51 @@ def write_atomic(path: Path, data: str | bytes) -> None:
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
+
+
+def check_resumable_dir(out: Path, *, manifest: str, kind: str, definition: dict,
+                        noun: str) -> bool:
+    """Return whether ``out`` holds the same resumable result to go on with; raise if unusable.
+
+    A command whose directory fills as it works (a campaign, a falsification search)
+    writes ``manifest`` with its ``kind`` and ``definition``: the same command resumes it;
+    another ``noun`` (other definition values), another result or files of the user's are
+    refused, and a new or empty directory must be creatable.
+
+    Examples
+    --------
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> check_resumable_dir(folder / "new", manifest="m.json", kind="k", definition={},
+    ...                     noun="search")
+    False
+    >>> (folder / "mine").mkdir(); _ = (folder / "mine" / "notes.md").write_text("mine")
+    >>> check_resumable_dir(folder / "mine", manifest="m.json", kind="k", definition={},
+    ...                     noun="search")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --out: .../mine: holds files of yours; choose a new or empty \
+directory
+    >>> shutil.rmtree(folder)
+    """
+    manifest_file = out / manifest
+    if out.exists() and not out.is_dir():
+        raise SpecError("--out", str(out), "exists and is not a directory; choose a directory")
+    if out.is_dir() and manifest_file.is_file():
+        try:
+            found = json.loads(manifest_file.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            found = None
+        if not isinstance(found, dict) or found.get("kind") != kind:
+            raise SpecError("--out", str(out), f"holds a result that is not a {noun}; choose "
+                            "a new or empty directory")
+        differs = [key for key, value in definition.items()
+                   if found.get("definition", {}).get(key) != value]
+        if differs:
+            raise SpecError("--out", str(out), f"holds another {noun} (its {', '.join(differs)}"
+                            " differ); choose another --out, or delete it to start again")
+        return True
+    if out.is_dir() and any(out.iterdir()):
+        what = "a result of another command" if is_result_dir(out) else "files of yours"
+        raise SpecError("--out", str(out), f"holds {what}; choose a new or empty directory")
+    check_writable_parent(out / RESULT_MARKER if out.exists() else out, option="--out")
+    return False

@@ -163,6 +163,8 @@ def summarize(log: RunLog) -> dict[str, Any]:
             "safety_scans": len(log.mapper_seconds),
         },
         **extra,
+        # Only a run with seeded faults says so: a fault-free run's metrics stay as they were.
+        **({"faults": spec.faults.active()} if spec.faults.active() else {}),
         **({"vehicles": {name: summarize(vehicle) for name, vehicle in log.vehicles.items()}}
            if log.vehicles else {}),
     }

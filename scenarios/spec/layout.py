@@ -402,7 +402,7 @@ def check_scenario_layout(
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
-and no such file; bundled worlds: occlusion_hall, pal1, pal3, sim1, sim2, warehouse
+and no such file; bundled worlds: ...
     """
     footprint = robot_footprint(spec.robot, file=spec.source)
     world = scenario_world(spec)

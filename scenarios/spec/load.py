@@ -53,6 +53,7 @@ __all__ = [
     "scenario_from_toml",
     "scenario_help",
     "scenario_path",
+    "scenario_table",
 ]
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
@@ -76,8 +77,8 @@ def bundled_scenarios() -> tuple[str, ...]:
     Examples
     --------
     >>> bundled_scenarios()  # doctest: +NORMALIZE_WHITESPACE
-    ('occlusion_hall', 'pal1', 'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse',
-     'warehouse_fleet', 'warehouse_occlusion')
+    ('fault_blind_policy', 'fault_short_field', 'fault_slow_scanner', 'occlusion_hall', 'pal1',
+     'pal3a', 'pal3b', 'sim1', 'sim2', 'warehouse', 'warehouse_fleet', 'warehouse_occlusion')
     """
     return tuple(sorted(path.stem for path in DATA_DIR.glob("*.toml")))
 
@@ -92,7 +93,7 @@ def scenario_help() -> str:
     Examples
     --------
     >>> scenario_help()  # doctest: +ELLIPSIS
-    'bundled name (occlusion_hall, pal1, pal3a, ..., warehouse_occlusion) or a .toml'
+    'bundled name (fault_blind_policy, fault_short_field, ..., warehouse_occlusion) or a .toml'
     """
     return f"bundled name ({', '.join(bundled_scenarios())}) or a .toml"
 
@@ -121,8 +122,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Traceback (most recent call last):
     ...
     semistatic.errors.SpecError: sim3: <file>: not a bundled scenario (did you mean 'sim2'?) \
-and no such file; bundled: occlusion_hall, pal1, pal3a, pal3b, sim1, sim2, warehouse, \
-warehouse_fleet, warehouse_occlusion
+and no such file; bundled: fault_blind_policy, fault_short_field, fault_slow_scanner, \
+occlusion_hall, pal1, pal3a, pal3b, sim1, sim2, warehouse, warehouse_fleet, warehouse_occlusion
     """
     text = str(name_or_path)
     names = bundled_scenarios()
@@ -355,6 +356,21 @@ def laser_mapper_params(spec: ScenarioSpec) -> MapperParams:
     """
     laser = PRESETS[spec.robot].safety_laser.laser
     return spec_noise_params(MapperParams(), laser.range_sigma * spec.noise.range)
+
+
+def scenario_table(name_or_path: str | Path, *, overrides: Iterable[str] = ()) -> dict[str, Any]:
+    """Return a scenario file's table with ``overrides`` set, as :func:`load_scenario` reads it.
+
+    The table is what a file that needs no ``--set`` would hold (``semistatic falsify``
+    writes its counterexamples so); nothing is validated but the keys.
+
+    Examples
+    --------
+    >>> table = scenario_table("pal1", overrides=["seed=4", "mapper.gate=0.1"])
+    >>> table["seed"], table["mapper"]["gate"], table["world"]
+    (4, 0.1, 'pal1')
+    """
+    return _apply_overrides(read_toml(scenario_path(name_or_path)), overrides)[0]
 
 
 def load_scenario(name_or_path: str | Path, *, overrides: Iterable[str] = ()) -> ScenarioSpec:

@@ -9,7 +9,7 @@ named in every error).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from semistatic.errors import MEMORY, SpecError
 from semistatic.params import MapperParams
@@ -20,6 +20,7 @@ __all__ = [
     "BOX_ACTIONS",
     "POLICIES",
     "BoxMove",
+    "Faults",
     "Noise",
     "Rates",
     "SafetySettings",
@@ -35,6 +36,9 @@ MAX_SEED = 2**63 - 1
 
 MAX_LAP_TIMEOUT = 3600.0
 """Longest lap timeout (s): a lap of a bundled path takes 25-60 s."""
+
+MAX_SCANNER_LATENCY = 2.0
+"""Longest seeded scanner latency (s): a dozen scans of a 12.5 Hz scanner, far past any field."""
 
 MAX_START_TIME = 3600.0
 """Latest start of a fleet vehicle (s): an hour of the others driving alone."""
@@ -167,6 +171,59 @@ class SafetySettings:
 
 
 @dataclass(frozen=True)
+class Faults:
+    """Seeded faults of the vehicle's safety chain (table ``[faults]``), all off by default.
+
+    Faults are for studying failures, e.g. as the target of a falsification search: each
+    breaks one link of the chain the field sizing relies on. The sizing check
+    (:mod:`scenarios.spec.field_sizing`) deliberately ignores them and still sizes the
+    fields by the nominal response time and deceleration, so a faulty vehicle drives
+    fields that are too small for it; the safety record reports what then happens (every
+    contact is a contact). With every fault off a run is the same as without the table.
+
+    Parameters
+    ----------
+    scanner_latency_s
+        Extra delay (s) before the safety scanner's decision (zone, stop, slowdown)
+        reaches the vehicle, on top of the modelled response time: a delay line of
+        ``scanner_latency_s * safety_hz`` safety scans, to the nearest scan. The sized
+        response time
+        (``multiple_sampling`` scan periods) doubles the scanner's response.
+    braking_factor
+        Share of the deceleration the field sizing assumes that the vehicle brakes with
+        (1: the nominal brakes).
+    unguarded_minimum_field
+        The minimum protective field no longer counts every reading inside it: the field
+        policy alone decides (the ``adaptive`` policy then ignores a reading near a mapped
+        object even right in front of the vehicle).
+
+    Examples
+    --------
+    >>> Faults().active()
+    {}
+    >>> Faults(scanner_latency_s=0.16, unguarded_minimum_field=True).active()
+    {'scanner_latency_s': 0.16, 'unguarded_minimum_field': True}
+    >>> Faults(braking_factor=0.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: <memory>: braking_factor: must be > 0.0 and <= 1.0, got 0.0
+    """
+
+    scanner_latency_s: float = field(default=0.0, metadata=bounds(ge=0.0,
+                                                                  le=MAX_SCANNER_LATENCY))
+    braking_factor: float = field(default=1.0, metadata=bounds(gt=0.0, le=1.0))
+    unguarded_minimum_field: bool = False
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    def active(self) -> dict[str, float | bool]:
+        """Return the faults switched on, by key, with their values (empty: none)."""
+        return {item.name: getattr(self, item.name) for item in fields(self)
+                if getattr(self, item.name) != item.default}
+
+
+@dataclass(frozen=True)
 class BoxMove:
     """A change to the semi-static boxes before lap ``lap`` starts (laps count from 1).
 
@@ -296,6 +353,8 @@ class ScenarioSpec:
         Noise scale factors (table ``[noise]``).
     safety
         Safety supervisor and field policy (table ``[safety]``).
+    faults
+        Seeded faults of the safety chain, all off by default (table ``[faults]``).
     mapper
         Mapper thresholds (table ``[mapper]``).
     moves
@@ -324,6 +383,7 @@ class ScenarioSpec:
     rates: Rates = field(default_factory=Rates)
     noise: Noise = field(default_factory=Noise)
     safety: SafetySettings = field(default_factory=SafetySettings)
+    faults: Faults = field(default_factory=Faults)
     mapper: MapperParams = field(default_factory=MapperParams)
     moves: tuple[BoxMove, ...] = ()
     vehicles: tuple[VehicleSpec, ...] = ()

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from scenarios.logs.recording import Recording, read_recording
 from scenarios.logs.recording_replay import replay_recording, replay_setting
@@ -29,12 +29,16 @@ from scenarios.process.workers import worker_pool
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
 
+if TYPE_CHECKING:
+    from scenarios.tuning.warm import WarmStarts
+
 __all__ = [
     "BACKENDS",
     "PointResult",
     "PoolBackend",
     "RayBackend",
     "RecordingSet",
+    "check_backend",
     "open_backend",
     "run_point",
     "run_points",
@@ -140,13 +144,19 @@ class RecordingSet:
         raise AssertionError("unreachable: check_matches refuses another scenario")
 
 
-def run_point(spec: ScenarioSpec, recordings: RecordingSet | None = None) -> Outcome:
+def run_point(spec: ScenarioSpec, recordings: RecordingSet | WarmStarts | None = None,
+              ) -> Outcome:
     """Run one point; a run that raises is reported, not fatal.
 
     One extreme threshold that makes a run fail (e.g. the robot never re-localises)
-    should cost its own row, not the hours of the rest of the sweep.
+    should cost its own row, not the hours of the rest of the sweep. ``recordings`` are
+    a point's recordings to replay, or its :class:`WarmStarts`.
     """
+    from scenarios.tuning.warm import WarmStarts  # the closed loop: loaded in workers only
+
     try:
+        if isinstance(recordings, WarmStarts):
+            return recordings.run(spec), None
         if recordings is not None and recordings.paths:
             return replay_recording(recordings.for_spec(spec), spec), None
         from scenarios.bench.runner import run_scenario
@@ -208,7 +218,8 @@ def _run_indexed_point(
     return index, run_point(spec, recordings)
 
 
-def run_points(specs: Sequence[ScenarioSpec], recordings: RecordingSet | None = None,
+def run_points(specs: Sequence[ScenarioSpec],
+               recordings: RecordingSet | WarmStarts | None = None,
                ) -> list[Outcome]:
     """Run the points of one search trial (its seeds) one after the other; return outcomes.
 
@@ -283,7 +294,7 @@ class PoolBackend:
         return len(set(pids))
 
     def submit(self, key: Any, specs: Sequence[ScenarioSpec],
-               recordings: RecordingSet | None) -> None:
+               recordings: RecordingSet | WarmStarts | None) -> None:
         """Start the points ``specs`` of task ``key``."""
         self._pool.apply_async(
             run_points, (list(specs), recordings),
@@ -349,7 +360,7 @@ class RayBackend:
         )))
 
     def submit(self, key: Any, specs: Sequence[ScenarioSpec],
-               recordings: RecordingSet | None) -> None:
+               recordings: RecordingSet | WarmStarts | None) -> None:
         """Start the points ``specs`` of task ``key`` as one Ray task."""
         self._pending[key] = (self._remote.remote(list(specs), recordings), len(specs))
 
@@ -369,6 +380,30 @@ class RayBackend:
                 except self._ray.exceptions.RayError as error:
                     done.append((key, [(None, f"{type(error).__name__}: {error}")] * count))
         return done
+
+
+def check_backend(name: str, jobs: int, address: str | None = None) -> None:
+    """Raise :class:`~semistatic.errors.SpecError` unless the backend options make sense.
+
+    ``--jobs`` in range, ``--address`` only with Ray, and Ray installed when asked for.
+
+    Examples
+    --------
+    >>> check_backend("pool", 2, "10.0.0.1:6379")
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --address: 10.0.0.1:6379: is a Ray address: add --backend ray
+    """
+    import importlib.util
+
+    from scenarios.process.errors import check_jobs
+    from semistatic.errors import SpecError
+
+    check_jobs(jobs)
+    if address is not None and name != "ray":
+        raise SpecError("--address", address, "is a Ray address: add --backend ray")
+    if name == "ray" and importlib.util.find_spec("ray") is None:
+        raise SpecError("--backend", "ray", "Ray is not installed: pip install 'semistatic[ray]'")
 
 
 def open_backend(name: str, jobs: int, address: str | None = None) -> PoolBackend | RayBackend:

@@ -35,6 +35,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import optuna
 
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value
@@ -49,9 +50,11 @@ __all__ = [
     "HEARTBEAT_S",
     "SAMPLERS",
     "STORAGE_OPTION",
+    "RejectedPoint",
     "SearchConfig",
     "finished_trials",
     "open_study",
+    "resumed_seed",
     "run_study",
     "trial_results",
 ]
@@ -74,6 +77,14 @@ STORAGE_OPTION = "--storage"
 OBJECTIVE_OPTION = "--objective"
 CONFIG_ATTR = "semistatic_search"
 """Study user attribute holding what defines the search (checked on resume)."""
+
+
+class RejectedPoint(Exception):
+    """Raised by a search's ``points(values)`` for values that make no valid scenario.
+
+    (A drawn box pushed into a wall, say.) :func:`run_study` tells the trial failed, with
+    the message as its ``error``: the values are tried, not run.
+    """
 
 
 @dataclass(frozen=True)
@@ -145,6 +156,10 @@ class SearchConfig:
             **({"also": list(self.also)} if self.also else {}),
         }))
 
+    def distributions(self) -> dict[str, optuna.distributions.BaseDistribution]:
+        """Return Optuna's distribution of each parameter, by key."""
+        return {param.key: param.distribution() for param in self.params}
+
     def points(self, values: Mapping[str, Any]):
         """Return the validated sweep points of ``values``: each scenario with each seed."""
         return self._points({key: (value,) for key, value in values.items()})
@@ -173,13 +188,18 @@ class SearchConfig:
                 for point in points:
                     recordings.for_spec(point.spec)
 
-    def sampler_object(self) -> optuna.samplers.BaseSampler:
-        """Return the Optuna sampler (seeded, so a search is repeatable)."""
+    def sampler_object(self, resumed: int = 0) -> optuna.samplers.BaseSampler:
+        """Return the Optuna sampler (seeded, so a search is repeatable).
+
+        ``resumed`` is the number of trials a resumed study holds: its sampler is seeded
+        by :func:`resumed_seed`, so it does not draw the first trials' values again.
+        """
+        seed = resumed_seed(self.sampler_seed, resumed)
         if self.sampler in ("grid", "random"):
             # The grid's points are queued when the study is made (grid_trials): Optuna's
             # GridSampler stops the study from inside tell(), which only works in optimize().
-            return optuna.samplers.RandomSampler(seed=self.sampler_seed)
-        return optuna.samplers.TPESampler(seed=self.sampler_seed)
+            return optuna.samplers.RandomSampler(seed=seed)
+        return optuna.samplers.TPESampler(seed=seed)
 
     def grid_trials(self) -> list[dict[str, Any]]:
         """Return every point of the grid sampler's grid, in product order (else ``[]``).
@@ -226,6 +246,22 @@ class SearchConfig:
         return result
 
 
+def resumed_seed(seed: int, resumed: int) -> int:
+    """Return the sampler seed of a study resumed with ``resumed`` trials (``seed`` when new).
+
+    A sampler made again with its first seed would propose the values it proposed before
+    the interruption: a resumed study's sampler continues from a seed of its own.
+
+    Examples
+    --------
+    >>> resumed_seed(7, 0), resumed_seed(7, 12) == resumed_seed(7, 12) != resumed_seed(7, 13)
+    (7, True)
+    """
+    if resumed == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, resumed]).generate_state(1)[0])
+
+
 def _check_storage_url(url: str) -> optuna.storages.RDBStorage:
     try:
         return optuna.storages.RDBStorage(
@@ -242,21 +278,25 @@ def open_study(config: SearchConfig, url: str, name: str,
     """Open study ``name`` in storage ``url`` (created when new); return it and the storage.
 
     A study made by a different search (other parameters, objectives, seeds...) is left
-    untouched and refused with :class:`SpecError`.
+    untouched and refused with :class:`SpecError`. ``config`` is a :class:`SearchConfig`
+    or another search with its ``sampler_object(resumed)``, ``fingerprint()``,
+    ``directions()`` and ``grid_trials()``.
     """
     storage = _check_storage_url(url)
-    sampler = config.sampler_object()
     if name in optuna.study.get_all_study_names(storage):
-        study = optuna.load_study(study_name=name, storage=storage, sampler=sampler)
-        if study.user_attrs.get(CONFIG_ATTR) != config.fingerprint():
+        study = optuna.load_study(study_name=name, storage=storage)
+        stored, wanted = study.user_attrs.get(CONFIG_ATTR), config.fingerprint()
+        if stored != wanted:
+            stored = stored if isinstance(stored, dict) else {}
+            differs = [key for key in wanted if stored.get(key) != wanted[key]] or ["all"]
             raise SpecError(
                 STORAGE_OPTION, name,
-                f"study {name!r} in {url} belongs to another search (other --param, "
-                "--objective, --seeds, --laps, --set or --sampler); use another --out, "
-                "--storage or --study",
+                f"study {name!r} in {url} belongs to another search (its "
+                f"{', '.join(differs)} differ); use another --out, --storage or --study",
             )
+        study.sampler = config.sampler_object(resumed=len(study.get_trials(deepcopy=False)))
         return study, storage
-    study = optuna.create_study(storage=storage, study_name=name, sampler=sampler,
+    study = optuna.create_study(storage=storage, study_name=name, sampler=config.sampler_object(),
                                 directions=config.directions())
     study.set_user_attr(CONFIG_ATTR, config.fingerprint())
     for values in config.grid_trials()[:config.trials]:
@@ -306,14 +346,20 @@ def _tell(study: optuna.Study, trial: optuna.trial.Trial, config: SearchConfig,
 def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: SearchConfig,
               backend,
               recordings: RecordingSet | None = None,
-              on_trial: Callable[[int, str], None] | None = None) -> int:
+              on_trial: Callable[[int, str], None] | None = None,
+              until: Callable[[optuna.Study], bool] | None = None) -> int:
     """Run trials on ``backend`` until the study has ``config.trials`` finished ones.
 
     Returns how many trials this call ran. Trials another driver is running count as
     in flight; once abandoned (no heartbeat for ``GRACE_S``) they are queued again and
-    run here. ``on_trial(number, label)`` is called as each trial is told.
+    run here. ``on_trial(number, label)`` is called as each trial is told. When
+    ``until(study)`` holds, no further trial is asked for (those in flight finish).
+
+    ``config`` is a :class:`SearchConfig` or any search with the same ``trials``,
+    ``distributions()``, ``points(values)`` (which may raise :class:`RejectedPoint`),
+    ``objectives`` and ``objective_values(metrics)``.
     """
-    distributions = {param.key: param.distribution() for param in config.params}
+    distributions = config.distributions()
     inflight: dict[int, tuple[optuna.trial.Trial, list]] = {}
     ran = 0
     while True:
@@ -323,15 +369,26 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
         foreign = sum(1 for trial in trials
                       if trial.state == optuna.trial.TrialState.RUNNING
                       and trial.number not in inflight)
-        if finished >= config.trials and not inflight:
+        done = until is not None and until(study)
+        if (finished >= config.trials or done) and not inflight:
             return ran
-        free = config.trials - finished - len(inflight) - foreign
-        while free > 0 and len(inflight) < backend.capacity:
+        free = 0 if done else config.trials - finished - len(inflight) - foreign
+        # One trial more than the workers: it waits in the backend's queue and starts the
+        # moment a worker is free, while the driver asks for and plans the next one.
+        while free > 0 and len(inflight) < backend.capacity + 1:
             trial = study.ask(distributions)
-            points = config.points(trial.params)
+            free -= 1
+            try:
+                points = config.points(trial.params)
+            except RejectedPoint as rejected:
+                trial.set_user_attr("error", f"rejected: {rejected}")
+                study.tell(trial, state=optuna.trial.TrialState.FAIL)
+                ran += 1
+                if on_trial is not None:
+                    on_trial(trial.number, f"rejected: {rejected}")
+                continue
             inflight[trial.number] = (trial, points)
             backend.submit(trial.number, [point.spec for point in points], recordings)
-            free -= 1
         for trial, _ in inflight.values():
             # Optuna's Trial has no public id; the heartbeat API takes the storage id.
             storage.record_heartbeat(trial._trial_id)
@@ -344,7 +401,8 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
                   [point.run for point in points])
             ran += 1
             if on_trial is not None:
-                values = " ".join(f"{key}={value}" for key, value in trial.params.items())
+                values = " ".join(f"{key}={value:.6g}" if isinstance(value, float)
+                                  else f"{key}={value}" for key, value in trial.params.items())
                 on_trial(number, values)
 
 

@@ -15,7 +15,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sqlite3
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from scenarios.results.outputs import json_text
 from scenarios.tuning.params import grid_size, parse_params
 from scenarios.tuning.points import GRID_OPTION, parse_seeds
 from scenarios.tuning.report import format_study, plot_study, study_report
-from scenarios.tuning.run import RecordingSet, open_backend
+from scenarios.tuning.run import RecordingSet, check_backend, open_backend
 from scenarios.tuning.search import (
     SearchConfig,
     finished_trials,
@@ -89,10 +88,7 @@ def main_search(args: argparse.Namespace) -> int:
     if args.grids:
         raise SpecError(GRID_OPTION, args.grids[0], "search with --param or sweep with "
                         "--grid, not both (--sampler grid makes a grid of --param ranges)")
-    if args.address is not None and args.backend != "ray":
-        raise SpecError("--address", args.address, "is a Ray address: add --backend ray")
-    if args.backend == "ray" and importlib.util.find_spec("ray") is None:
-        raise SpecError("--backend", "ray", "Ray is not installed: pip install 'semistatic[ray]'")
+    check_backend(args.backend, args.jobs, args.address)
     recordings = RecordingSet.read(args.recordings) if args.recordings else None
     config = _config(args, recordings)
     name = args.study or "tune-" + "+".join(

@@ -65,7 +65,9 @@ def error_of(name_or_path, overrides=()) -> SpecError:
 def test_bundled_scenarios_are_the_table_1_rows():
     assert paper_scenarios() == tuple(sorted(PAPER_SCENARIOS))
     assert bundled_scenarios() == tuple(sorted((*paper_scenarios(), "warehouse", "warehouse_fleet",
-                                                "occlusion_hall", "warehouse_occlusion")))
+                                                "occlusion_hall", "warehouse_occlusion",
+                                                "fault_blind_policy", "fault_short_field",
+                                                "fault_slow_scanner")))
 
 
 def test_bundled_scenario_loads_as_the_paper_ran_it(name):

@@ -1,4 +1,8 @@
-"""A tiny world and scenario for fast closed-loop tests: a 3.5 m path, one box."""
+"""A tiny world and scenario for fast closed-loop tests: a 3.5 m path, one box.
+
+``write_crossing`` adds a person who, in lap 3 only, steps out past the box into the lane
+when the robot comes (the warm-start tests vary how far ahead and how fast).
+"""
 
 from pathlib import Path
 
@@ -54,4 +58,30 @@ def write_tiny(folder: Path, *, scenario: str = TINY_SCENARIO) -> Path:
     (folder / "tiny_world.toml").write_text(TINY_WORLD)
     path = folder / "tiny.toml"
     path.write_text(scenario)
+    return path
+
+
+CROSSER = """
+[[people]]
+name = "crosser"
+waypoints = [[3.1, -1.2], [3.1, 1.0]]
+radius = 0.2
+trigger = "distance"
+trigger_distance = {trigger_distance}
+speed = {speed}
+laps = [3]
+"""
+
+CROSSING_SCENARIO = TINY_SCENARIO.replace("laps = 2", "laps = 3")
+
+
+def write_crossing(folder: Path, *, trigger_distance: float = 2.0, speed: float = 1.0,
+                   name: str = "tiny_world") -> Path:
+    """Write the tiny world with the lap-3 crosser as ``NAME.toml`` and a 3-lap scenario
+    on it as ``NAME_scenario.toml``; return the scenario path."""
+    world = TINY_WORLD.replace('name = "tiny"', f'name = "tiny"\n# variant {name}')
+    (folder / f"{name}.toml").write_text(
+        world + CROSSER.format(trigger_distance=trigger_distance, speed=speed))
+    path = folder / f"{name}_scenario.toml"
+    path.write_text(CROSSING_SCENARIO.replace("tiny_world.toml", f"{name}.toml"))
     return path

@@ -80,7 +80,8 @@ def name(request: pytest.FixtureRequest) -> str:
 
 
 def test_bundled_worlds_are_the_papers_environments_the_warehouse_and_the_occlusion_hall():
-    assert bundled_worlds() == ("occlusion_hall", *PAPER_WORLDS, "warehouse")
+    assert bundled_worlds() == ("fault_hall", "fault_hall_pallet", "fault_hall_short",
+                                "occlusion_hall", *PAPER_WORLDS, "warehouse")
 
 
 def test_world_loads_with_its_name_and_source(name):

@@ -1,0 +1,1 @@
+"""Falsification: search scenario variations for where a field policy fails."""
