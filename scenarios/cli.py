@@ -78,6 +78,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; earlier results are left as they were", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SystemError as error:
+        # Ctrl-C while numba unpickles a cached kernel reaches us as a SystemError
+        # ("returned a result with an exception set") caused by the KeyboardInterrupt.
+        if not _caused_by_interrupt(error):
+            raise
+        print("interrupted; earlier results are left as they were", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _caused_by_interrupt(error: BaseException) -> bool:
+    """Return whether a KeyboardInterrupt is among the causes of ``error``.
+
+    Examples
+    --------
+    >>> try:
+    ...     try:
+    ...         raise KeyboardInterrupt
+    ...     except KeyboardInterrupt as interrupt:
+    ...         raise SystemError("returned a result with an exception set") from interrupt
+    ... except SystemError as wrapped:
+    ...     _caused_by_interrupt(wrapped), _caused_by_interrupt(SystemError("other"))
+    (True, False)
+    """
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
 
 
 def console_main(argv: Sequence[str] | None = None) -> None:
