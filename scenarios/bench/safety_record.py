@@ -144,6 +144,8 @@ class SafetyRecorder(Observer):
         self._stop: dict | None = None
         self._box_revision = -1
         self._boxes: dict[str, shapely.Polygon] = {}
+        # Each protective field's reach from the footprint, by id (the field kept alive).
+        self._reaches: dict[int, tuple[shapely.Polygon, float]] = {}
 
     # ------------------------------------------------------------------ hooks
     def on_lap_start(self, vehicle, lap: int) -> None:
@@ -155,6 +157,7 @@ class SafetyRecorder(Observer):
         self._walls = [shapely.Polygon(wall.corners()) for wall in world.walls]
         self._pieces = {piece.name: piece.footprint() for piece in world.test_pieces}
         vehicle.log.safety_record = self.record  # the live record: readable during the run
+        self._reaches.clear()
         self._separations.clear()
         self._near.clear()
         self._inside_since.clear()
@@ -201,7 +204,8 @@ class SafetyRecorder(Observer):
         t, lap = vehicle.sim_time, vehicle.lap
         radii = self._radii
         local = transform_points(inverse(pose), np.array([xy for _, xy in people], dtype=float))
-        distances = shapely.distance(self._footprint, shapely.points(local))
+        centres = shapely.points(local)
+        distances = shapely.distance(self._footprint, centres)
         # The true twist costs an engine query and a cross product: asked only when a
         # person is near or inside (with a person in the scene it was a third of a tick).
         twist: list[float] = []
@@ -212,8 +216,9 @@ class SafetyRecorder(Observer):
             return twist[0]
 
         field = vehicle.segment.fields.protective_polygon
+        reach = self._reach(field)
         settings = vehicle.spec.safety
-        for (name, xy), centre, distance in zip(people, local, distances, strict=True):
+        for (name, xy), centre, distance in zip(people, centres, distances, strict=True):
             separation = max(0.0, float(distance) - radii[name])
             where = (float(xy[0]), float(xy[1]))
             self.record.note_separation("person", separation, t=t, lap=lap, where=where,
@@ -228,7 +233,9 @@ class SafetyRecorder(Observer):
                                f"{speed():.2f} m/s")
             elif separation > 1.5 * settings.near_miss_distance:
                 self._near.discard(name)
-            inside = shapely.distance(field, shapely.Point(centre)) <= radii[name]
+            # Farther than the field reaches from the footprint: not in it (no query).
+            inside = distance <= reach + radii[name] \
+                and shapely.distance(field, centre) <= radii[name]
             if inside and abs(speed()) > settings.creep_speed:
                 since, entry_speed = self._inside_since.setdefault(name, (t, abs(speed())))
                 late = t - since - self.response_time
@@ -245,6 +252,16 @@ class SafetyRecorder(Observer):
             else:
                 self._inside_since.pop(name, None)
                 self._reported_inside.discard(name)
+
+    def _reach(self, field: shapely.Polygon) -> float:
+        """Return how far (m) ``field`` reaches from the footprint (its farthest vertex)."""
+        key = id(field)
+        if key not in self._reaches:
+            vertices = shapely.points(shapely.get_coordinates(field))
+            # A micrometre more: rounding never decides a person's place in the field.
+            reach = float(shapely.distance(self._footprint, vertices).max()) + 1e-6
+            self._reaches[key] = (field, reach)
+        return self._reaches[key][1]
 
     def _ttc(self, key: tuple[str, str], separation: float, t: float) -> None:
         previous = self._separations.get(key)

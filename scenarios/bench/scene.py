@@ -82,6 +82,11 @@ class Scene:
         self._triggers: PersonTriggers | None = None
 
     @property
+    def triggers(self) -> PersonTriggers | None:
+        """Return the triggers of the people a vehicle triggers (``None``: no such person)."""
+        return self._triggers
+
+    @property
     def sim_time(self) -> float:
         """Return the simulated seconds since the run started."""
         return self.sim.sim_time

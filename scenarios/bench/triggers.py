@@ -17,6 +17,11 @@ A ``per_lap`` person's trigger re-arms when the lap starts; a person limited to 
 ``laps`` fires only in those. The vehicle's progress and path speed are what the vehicle
 itself knows (its follower); the geometry is the world's.
 
+Warm starts (:mod:`scenarios.tuning.warm`) *hold* people: a held trigger does not fire,
+so the person stands at the first waypoint, as every variation of its walk does until
+its own trigger fires; :meth:`PersonTriggers.fire_ticks` says at which tick of a recorded
+run that would have been.
+
 Examples
 --------
 >>> import numpy as np
@@ -110,6 +115,7 @@ class PersonTriggers:
         self._fleet = fleet
         self._crossings = self._crossings_of(people)
         self.fired: dict[str, float | None] = {c.person.name: None for c in self._crossings}
+        self.held: frozenset[str] = frozenset()
         self._lap_start: float | None = None
 
     def _crossings_of(self, people) -> list[Crossing]:
@@ -131,14 +137,57 @@ class PersonTriggers:
     def __bool__(self) -> bool:
         return bool(self._crossings)
 
+    @property
+    def watched(self) -> tuple[str, ...]:
+        """Return the names of the people a vehicle triggers."""
+        return tuple(crossing.person.name for crossing in self._crossings)
+
     def replace_people(self, people) -> None:
         """Watch for ``people`` from now on; a person's fire time this lap is kept.
 
         For a run that goes on with new people (``SimWorld.replace_people``): the
-        crossings are found anew, the fire times of the people still triggered stay.
+        crossings are found anew, the fire times of the people still triggered stay, and
+        no one is held any more.
         """
         self._crossings = self._crossings_of(people)
         self.fired = {c.person.name: self.fired.get(c.person.name) for c in self._crossings}
+        self.held = frozenset()
+
+    def hold(self, names) -> None:
+        """Keep the triggers of the people ``names`` from firing until :meth:`replace_people`."""
+        unknown = set(names) - set(self.watched)
+        if unknown:
+            raise ValueError(f"PersonTriggers: no triggered person named {sorted(unknown)}")
+        self.held = frozenset(names)
+
+    def fire_ticks(self, progress: np.ndarray, lap: int) -> dict[str, int | None]:
+        """Return the tick of ``progress`` at which each person's trigger would fire.
+
+        ``progress`` is the watched vehicle's progress along its path (m) at successive
+        ticks of lap ``lap``, from its first, as :meth:`update` would read it (``NaN``
+        while the vehicle waits or is done). ``None``: the person does not fire in those
+        ticks (already fired, not in lap ``lap``, or its condition never holds). One
+        vehicle only: every person must watch the first vehicle of the fleet.
+        """
+        progress = np.asarray(progress, dtype=float)
+        ticks: dict[str, int | None] = {}
+        for crossing in self._crossings:
+            person = crossing.person
+            if crossing.vehicle is not self._fleet[0]:
+                raise ValueError(f"PersonTriggers.fire_ticks: person {person.name} watches "
+                                 f"{person.trigger_vehicle}, not the first vehicle")
+            # A person that fired earlier and does not re-arm with the lap stays fired.
+            already = self.fired[person.name] is not None and not person.per_lap
+            if already or not person.acts_in(lap):
+                ticks[person.name] = None
+                continue
+            front = float(np.asarray(crossing.vehicle.robot.footprint)[:, 0].max())
+            with np.errstate(invalid="ignore"):
+                fire = self._fires(crossing, crossing.s - (progress + front))
+            fire &= ~np.isnan(progress)
+            first = np.flatnonzero(fire)
+            ticks[person.name] = int(first[0]) if first.size else None
+        return ticks
 
     def update(self, t: float, lap_start: float, lap: int | None = None,
                ) -> dict[str, float | None]:
@@ -156,28 +205,30 @@ class PersonTriggers:
             person, vehicle = crossing.person, crossing.vehicle
             if self.fired[person.name] is not None or vehicle.done or vehicle.waiting:
                 continue
-            if lap is not None and not person.acts_in(lap):
+            if (lap is not None and not person.acts_in(lap)) or person.name in self.held:
                 continue
             front = float(np.asarray(vehicle.robot.footprint)[:, 0].max())
-            ahead = crossing.s - (vehicle.follower.progress + front)
-            if person.trigger == "distance":
-                fire = ahead <= person.trigger_distance
-            else:
-                fire = self._meets(crossing, ahead, vehicle)
-            if fire:
+            if self._fires(crossing, crossing.s - (vehicle.follower.progress + front)):
                 self.fired[person.name] = t
         return self.fired
 
+    @classmethod
+    def _fires(cls, crossing: Crossing, ahead):
+        """Return whether the trigger fires with the front ``ahead`` (m, float or array)."""
+        if crossing.person.trigger == "distance":
+            return ahead <= crossing.person.trigger_distance
+        return cls._meets(crossing, ahead)
+
     @staticmethod
-    def _meets(crossing: Crossing, ahead: float, vehicle) -> bool:
+    def _meets(crossing: Crossing, ahead):
         """Return whether the person must set off now to meet the vehicle at ``meet_at``."""
-        person = crossing.person
+        person, vehicle = crossing.person, crossing.vehicle
         footprint = np.asarray(vehicle.robot.footprint, dtype=float)
         width = float(np.ptp(footprint[:, 1]))
         centre = 0.5 * float(footprint[:, 1].min() + footprint[:, 1].max())
         offset = centre + (person.meet_at - 0.5) * width   # left of the path, m
         if abs(crossing.sine) < 1e-6:
-            return False  # a leg along the path never crosses it
+            return np.zeros_like(ahead, dtype=bool)  # a leg along the path never crosses it
         along_leg = offset / crossing.sine            # from the crossing to M, on the leg
         along_path = along_leg * crossing.cosine      # ... and M's place along the path
         person_time = person.start_time + (crossing.walk + along_leg) / person.speed

@@ -189,7 +189,8 @@ def main_falsify(args: argparse.Namespace) -> int:
             warm = None if args.no_warm_start else config.warm_lap()
             if warm is not None and remaining:
                 print(f"{config.policy}: the varied people act from lap {warm} on: laps "
-                      f"1-{warm - 1} are simulated once per worker (warm start)")
+                      f"1-{warm - 1}, and lap {warm} up to where they step out, are "
+                      "simulated once per worker (warm start)")
             source = None if warm is None else WarmStarts(config.base_spec(), warm)
             with count_progress(remaining, f"falsify {name} {config.policy}", "sample") as advance:
                 run_study(study, storage, config, backend, source,

@@ -71,8 +71,6 @@ HEARTBEAT_S = 2
 """Seconds between heartbeats of a running trial (Optuna wants an integer)."""
 GRACE_S = 6
 """Seconds without a heartbeat after which a running trial counts as abandoned."""
-POLL_S = 0.5
-"""How long the driver waits for a finished trial before it records heartbeats again."""
 STORAGE_OPTION = "--storage"
 OBJECTIVE_OPTION = "--objective"
 CONFIG_ATTR = "semistatic_search"
@@ -362,13 +360,28 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
     distributions = config.distributions()
     inflight: dict[int, tuple[optuna.trial.Trial, list]] = {}
     ran = 0
+    beat = -math.inf  # when the driver last recorded heartbeats (time.monotonic)
+    seen: set[int] = set()  # other drivers' running trials, each given one heartbeat
+    changed = True    # a trial was told since the study was last read
     while True:
-        optuna.storages.fail_stale_trials(study)
-        trials = study.get_trials(deepcopy=False)
-        finished = sum(1 for trial in trials if _is_finished(trial))
-        foreign = sum(1 for trial in trials
-                      if trial.state == optuna.trial.TrialState.RUNNING
-                      and trial.number not in inflight)
+        # Reading the study and recording heartbeats are database round trips: once per
+        # HEARTBEAT_S, or when a trial was told (the workers share the CPUs with us).
+        due = time.monotonic() - beat >= HEARTBEAT_S
+        if changed or due:
+            optuna.storages.fail_stale_trials(study)
+            trials = study.get_trials(deepcopy=False)
+            finished = sum(1 for trial in trials if _is_finished(trial))
+            running = [trial for trial in trials if trial.state == optuna.trial.TrialState.RUNNING
+                       and trial.number not in inflight]
+            foreign = len(running)
+            for trial in running:
+                if trial.number not in seen:
+                    # One heartbeat at first sight: a trial left running without one (its
+                    # driver died between asking and beating) goes stale GRACE_S from now,
+                    # while a live driver's own heartbeats keep its trial fresh.
+                    storage.record_heartbeat(trial._trial_id)
+                    seen.add(trial.number)
+            changed = False
         done = until is not None and until(study)
         if (finished >= config.trials or done) and not inflight:
             return ran
@@ -377,7 +390,12 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
         # moment a worker is free, while the driver asks for and plans the next one.
         while free > 0 and len(inflight) < backend.capacity + 1:
             trial = study.ask(distributions)
+            # Optuna's Trial has no public id; the heartbeat API takes the storage id.
+            # At once: a running trial without a heartbeat is never taken for stale, so
+            # one asked just before the driver dies would hold a resumed study forever.
+            storage.record_heartbeat(trial._trial_id)
             free -= 1
+            changed = True
             try:
                 points = config.points(trial.params)
             except RejectedPoint as rejected:
@@ -389,17 +407,20 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
                 continue
             inflight[trial.number] = (trial, points)
             backend.submit(trial.number, [point.spec for point in points], recordings)
-        for trial, _ in inflight.values():
-            # Optuna's Trial has no public id; the heartbeat API takes the storage id.
-            storage.record_heartbeat(trial._trial_id)
+        if due:
+            for trial, _ in inflight.values():
+                storage.record_heartbeat(trial._trial_id)
+            beat = time.monotonic()
+        wait = max(0.0, beat + HEARTBEAT_S - time.monotonic())
         if not inflight:
-            time.sleep(POLL_S)  # others' trials: wait for them to finish or go stale
+            time.sleep(wait)  # others' trials: wait for them to finish or go stale
             continue
-        for number, outcomes in backend.finished(timeout=POLL_S):
+        for number, outcomes in backend.finished(timeout=wait):
             trial, points = inflight.pop(number)
             _tell(study, trial, config, outcomes, [point.seed for point in points],
                   [point.run for point in points])
             ran += 1
+            changed = True
             if on_trial is not None:
                 values = " ".join(f"{key}={value:.6g}" if isinstance(value, float)
                                   else f"{key}={value}" for key, value in trial.params.items())

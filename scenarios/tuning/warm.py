@@ -9,6 +9,15 @@ each sample from it: the metrics are exactly those of a full run of the sample
 (:func:`scenarios.tuning.run.run_point`), ``performance`` aside (timing; a warm
 sample's wall and engine times count the shared laps as measured once).
 
+The samples share more than those laps: until its trigger fires, a person a vehicle
+triggers stands at its first waypoint whatever its walk. So the warm start also runs
+lap ``lap`` once with every such person held (:meth:`PersonTriggers.hold
+<scenarios.bench.triggers.PersonTriggers.hold>`), saving a checkpoint every
+:data:`CHECKPOINT_S` simulated seconds and the vehicle's progress at every tick; a sample
+starts from the last checkpoint before its own first trigger fires
+(:meth:`WarmStart.start_tick`). A person changed in what shows before that (first
+waypoint, remission, laps, a time trigger) starts the sample at the lap's start.
+
 A sample may differ from the base scenario only in people whose ``laps`` all come at or
 after the warm-start lap, in anything but their bodies (``radius``, ``height``,
 ``enabled``): those people were parked below the floor during the shared laps, in the
@@ -31,16 +40,26 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
+import numpy as np
+
+from scenarios.bench.saved_state import BenchState
 from scenarios.bench.testbench import Testbench
+from scenarios.bench.triggers import PersonTriggers
 from scenarios.results.outputs import summarize
 from scenarios.spec.layout import lap_worlds
 from scenarios.spec.routes import fleet_vehicles
 from scenarios.spec.scenario import ScenarioSpec
 from worlds.spec import PersonSpec, WorldSpec
 
-__all__ = ["BODY_FIELDS", "WarmStart", "WarmStarts"]
+__all__ = ["BODY_FIELDS", "CHECKPOINT_S", "WarmStart", "WarmStarts"]
+
+CHECKPOINT_S = 0.5
+"""Simulated seconds between the checkpoints of the warm-start lap: a sample replays at
+most this much of the base run before its own people act (each checkpoint costs a copy
+of the bench's state, about what 0.1 s of simulation costs)."""
 
 BODY_FIELDS = ("name", "enabled", "radius", "height")
 """A person's fields that make its body: built once, the same in every warm sample."""
@@ -61,9 +80,10 @@ class WarmStart:
 
     Notes
     -----
-    The state lives in one PyBullet server of this process until :meth:`close` (or the
-    end of a ``with`` block); every :meth:`run` restores it, so many samples in a row use
-    no more memory than one. Single-vehicle scenarios whose boxes are the same from
+    The checkpoints live in one PyBullet server of this process until :meth:`close` (or
+    the end of a ``with`` block); every :meth:`run` restores one, so many samples in a row
+    use no more memory than one. Building the warm start costs laps ``1 .. lap`` and a
+    state copy per checkpoint. Single-vehicle scenarios whose boxes are the same from
     ``lap`` on (moves, not additions or removals) only: PyBullet restores only the bodies
     it saved.
     """
@@ -82,11 +102,16 @@ class WarmStart:
                              "a saved state holds the bodies of its lap only")
         self.spec, self.lap = spec, int(lap)
         self._worlds = worlds
-        self._bench = Testbench(spec)
-        self._bench.reset()
-        while self._bench.lap < lap:
-            self._bench.step()
-        self._state = self._bench.save_state()
+        self._bench = bench = Testbench(spec)
+        bench.reset()
+        while bench.lap < lap:
+            bench.step()
+        self._checkpoints: list[tuple[int, BenchState]] = [(0, bench.save_state())]
+        self._progress = np.empty(0)
+        triggers = bench.scene.triggers
+        if triggers is not None:
+            self._fired_at_lap_start = dict(triggers.fired)
+            self._hold_through_lap(triggers)
 
     def differences(self, spec: ScenarioSpec) -> list[str]:
         """Return what keeps ``spec`` from running warm (empty: :meth:`run` accepts it).
@@ -127,14 +152,38 @@ class WarmStart:
             raise ValueError(f"WarmStart: {spec.name} differs from {self.spec.name} in "
                              f"more than the people of lap {self.lap} on: {'; '.join(found)}")
         bench = self._bench
-        bench.restore_state(self._state)
+        bench.restore_state(dict(self._checkpoints)[self.start_tick(spec)])
         bench.replace_people(spec)
         return summarize(bench.run())
+
+    def start_tick(self, spec: ScenarioSpec) -> int:
+        """Return the tick of lap ``lap`` (0: its start) :meth:`run` starts ``spec`` from.
+
+        The tick of the last checkpoint before ``spec``'s run leaves the base run's: when
+        one of its people's triggers fires (found on the base run's recorded progress),
+        or at once when a person differs before that (first waypoint, body, remission,
+        laps, a time trigger). ``spec`` must be accepted (:meth:`differences`).
+        """
+        if len(self._checkpoints) == 1:
+            return 0
+        ours = {person.name: person for person in self._worlds[0].people}
+        theirs = lap_worlds(spec)[0].people
+        if any(_before_firing(ours[person.name]) != _before_firing(person)
+               for person in theirs):
+            return 0
+        triggers = PersonTriggers(theirs, self._bench.fleet)
+        triggers.fired.update({name: self._fired_at_lap_start.get(name)
+                               for name in triggers.watched})
+        fires = [tick for tick in triggers.fire_ticks(self._progress, self.lap).values()
+                 if tick is not None]
+        diverges = min(fires, default=len(self._progress))
+        return max(tick for tick, _ in self._checkpoints if tick <= diverges)
 
     def close(self) -> None:
         """Free the saved state and the PyBullet server; safe to call twice."""
         if self._bench.sim is not None:
-            self._bench.release_state(self._state)
+            for _, state in self._checkpoints:
+                self._bench.release_state(state)
             self._bench.close()
 
     def __enter__(self) -> WarmStart:
@@ -144,6 +193,28 @@ class WarmStart:
         self.close()
 
     # ------------------------------------------------------------------ pieces
+    def _hold_through_lap(self, triggers: PersonTriggers) -> None:
+        """Run lap ``lap`` with every triggered person held, saving checkpoints on the way.
+
+        Until its trigger fires, a triggered person stands at its first waypoint in every
+        variation of its walk, as a held one does the whole lap: the base run's ticks up
+        to there are the sample's. The vehicle's progress at every tick is kept to find
+        that tick for each sample (:meth:`PersonTriggers.fire_ticks`).
+        """
+        bench = self._bench
+        vehicle = bench.fleet[0]
+        triggers.hold(triggers.watched)
+        progress: list[float] = []
+        saved_at = bench.sim_time
+        while not bench.done and bench.lap == self.lap:
+            if bench.sim_time - saved_at >= CHECKPOINT_S - 1e-9:
+                self._checkpoints.append((len(progress), bench.save_state()))
+                saved_at = bench.sim_time
+            idle = vehicle.done or vehicle.waiting
+            progress.append(math.nan if idle else vehicle.follower.progress)
+            bench.step()
+        self._progress = np.array(progress)
+
     def _people_differences(self, ours: tuple[PersonSpec, ...],
                             theirs: tuple[PersonSpec, ...]) -> list[str]:
         our_names = [person.name for person in ours]
@@ -167,6 +238,21 @@ class WarmStart:
         if body:
             found.append(f"person {before.name}'s body ({', '.join(body)})")
         return found
+
+
+_AFTER_FIRING = ("trigger", "trigger_distance", "meet_at", "speed", "start_time", "dwell",
+                 "loop")
+"""A triggered person's fields that matter only once its trigger fired (so do its
+waypoints after the first): before that, it stands at its first waypoint."""
+
+
+def _before_firing(person: PersonSpec) -> tuple:
+    """Return what a person is before its trigger fires (a time trigger: all of it)."""
+    if person.trigger == "time":
+        return (person,)
+    return (person.waypoints[0], *(getattr(person, field.name)
+                                   for field in dataclasses.fields(PersonSpec)
+                                   if field.name not in (*_AFTER_FIRING, "waypoints")))
 
 
 def _world_fields(ours: WorldSpec, theirs: WorldSpec) -> list[str]:

@@ -82,15 +82,16 @@ def _contact(metrics) -> bool:
 # worker's keys (and boxes' keys), the world with the fault and without, and the overrides
 # that switch the fault off. Measured (sobol grids of the boxes, docs in the headers):
 HITS = {
-    # fault_hall_short: contact; fault_hall with sized fields: 0.0955 m.
-    "fault_short_field": ({"trigger_distance": 2.0536, "speed": 1.3514, "start_time": 0.2725},
+    # The worker still stands in the lane when the slowed LGV comes: fault_hall_short,
+    # contact; fault_hall with sized fields: no contact.
+    "fault_short_field": ({"trigger_distance": 2.0871, "speed": 1.2571,
+                           "dwell": [0.0, 0.4163, 0.0]},
                           None, ("fault_hall_short", "fault_hall"),
                           ["safety.minimum_field=standard", "safety.undersized_fields=false"]),
     # In lap 2 the worker passing close by the mapped pallet goes unseen: contact; with
     # the minimum field guarded, no contact.
-    "fault_blind_policy": ({"trigger_distance": 2.1, "speed": 1.3},
-                           {"pallet": {"pose": [3.7546, -1.025, 0.0]}},
-                           ("fault_hall_pallet", "fault_hall_pallet"),
+    "fault_blind_policy": ({"trigger_distance": 2.1346, "speed": 1.2555, "start_time": 0.2664},
+                           None, ("fault_hall_pallet", "fault_hall_pallet"),
                            ["faults.unguarded_minimum_field=false"]),
     # 0.16 s late: contact; on time: 0.0955 m.
     "fault_slow_scanner": ({"trigger_distance": 2.0536, "speed": 1.3514, "start_time": 0.2725},

@@ -5,6 +5,8 @@ import re
 import sqlite3
 import subprocess
 import sys
+import threading
+from types import SimpleNamespace
 
 import optuna
 import pytest
@@ -13,6 +15,7 @@ from scenarios.spec.load import load_scenario
 from scenarios.tuning.metrics import TIMING_COLUMNS
 from scenarios.tuning.params import parse_param, parse_params
 from scenarios.tuning.run import PoolBackend, RayBackend
+from scenarios.tuning.search import GRACE_S, HEARTBEAT_S, run_study
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, kill_after_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
@@ -258,3 +261,60 @@ def test_a_trial_spans_every_recorded_scenario_and_ranks_by_mean_and_worst_case(
     assert [ranked[n] for n in study["ranking_by_worst"]] == sorted(worst)
     assert re.search(r"rmse_xy_m mean +worst +spread", stdout), stdout
     assert "mean over 2 run(s): tiny seed=3, noisy seed=3" in stdout
+
+
+class _Square:
+    """A search of one key, objective x squared (the protocol ``run_study`` takes)."""
+
+    trials = 3
+    objectives = ("value",)
+
+    def distributions(self):
+        return {"x": optuna.distributions.FloatDistribution(0.0, 1.0)}
+
+    def points(self, values):
+        return [SimpleNamespace(spec=values["x"], seed=0, run="square")]
+
+    def objective_values(self, metrics):
+        return {"mean": {"value": metrics[0]["value"]}}
+
+
+class _AtOnce:
+    """A backend that runs each point as it is submitted."""
+
+    capacity = 1
+
+    def __init__(self):
+        self.done = []
+
+    def submit(self, key, specs, recordings):
+        self.done.append((key, [({"value": spec * spec}, None) for spec in specs]))
+
+    def finished(self, timeout):
+        done, self.done = self.done, []
+        return done
+
+
+def test_a_trial_left_running_without_a_heartbeat_is_retried_not_waited_for(tmp_path):
+    # A driver killed between asking a trial and its first heartbeat leaves it RUNNING
+    # with no heartbeat; Optuna never takes such a trial for stale on its own.
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    storage = optuna.storages.RDBStorage(
+        url, heartbeat_interval=HEARTBEAT_S, grace_period=GRACE_S,
+        heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback())
+    study = optuna.create_study(storage=storage, sampler=optuna.samplers.RandomSampler(seed=1))
+    orphan = study.ask({"x": optuna.distributions.FloatDistribution(0.0, 1.0)})
+    # In a daemon thread, so that a search that waits for the orphan forever fails the
+    # test (after ten times the grace period) instead of hanging the suite.
+    ran = []
+    search = threading.Thread(daemon=True, target=lambda: ran.append(
+        run_study(study, storage, _Square(), _AtOnce())))
+    search.start()
+    search.join(timeout=10 * GRACE_S)
+    assert ran == [3], "the search waited for the orphaned trial"
+    states = [trial.state for trial in study.get_trials()]
+    assert states.count(optuna.trial.TrialState.COMPLETE) == 3
+    assert study.get_trials()[orphan.number].state == optuna.trial.TrialState.FAIL
+    retried = [trial for trial in study.get_trials()
+               if trial.system_attrs.get("failed_trial") == orphan.number]
+    assert [trial.params for trial in retried] == [orphan.params]

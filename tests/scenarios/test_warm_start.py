@@ -42,7 +42,7 @@ def varied(folder, spec, name, **crosser):
 @pytest.mark.slow
 def test_warm_samples_equal_their_full_runs(crossing):
     folder, spec, warm = crossing
-    stops = []
+    stops, starts = [], []
     for index, (distance, speed) in enumerate(VARIATIONS):
         sample = varied(folder, spec, f"sample_{index}", trigger_distance=distance, speed=speed)
         assert warm.accepts(sample)
@@ -50,11 +50,32 @@ def test_warm_samples_equal_their_full_runs(crossing):
         assert error is None
         assert without_timing(warm.run(sample)) == without_timing(full)
         stops.append(full["safety"]["stops_per_lap"])
+        starts.append(warm.start_tick(sample))
     assert stops[0] == [0, 0, 0]
+    # Stepping out at once (3 m ahead of a 3.1 m crossing) shares nothing of lap 3; the
+    # later the trigger, the later the checkpoint a sample starts from.
+    assert starts[0] == 0 < starts[1] < starts[2]
     assert all(lap_stops[2] > 0 for lap_stops in stops[1:])  # the person stops the robot
     # The state is restored each time: the first sample again gives the same metrics.
     again = varied(folder, spec, "sample_0", trigger_distance=3.0, speed=1.5)
     assert without_timing(warm.run(again))["safety"]["stops_per_lap"] == [0, 0, 0]
+
+
+@pytest.mark.slow
+def test_a_person_changed_before_stepping_out_starts_at_the_lap_start(crossing):
+    # Remission changes what the scanner sees of the person standing behind the box from
+    # the lap's first tick: no checkpoint inside lap 3 is that sample's.
+    folder, spec, warm = crossing
+    sample = varied(folder, spec, "shiny", trigger_distance=0.9, speed=0.6)
+    world = folder / "shiny.toml"
+    world.write_text(world.read_text().replace("radius = 0.2", "radius = 0.2\nremission = 0.9"))
+    sample = dataclasses.replace(spec, world=load_scenario(world.with_name(
+        "shiny_scenario.toml")).world)
+    later = varied(folder, spec, "late", trigger_distance=0.9, speed=0.6)
+    assert warm.start_tick(sample) == 0 < warm.start_tick(later)
+    full, error = run_point(sample)
+    assert error is None
+    assert without_timing(warm.run(sample)) == without_timing(full)
 
 
 @pytest.mark.slow
