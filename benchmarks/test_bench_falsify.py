@@ -6,11 +6,10 @@ where a person is touched. For each, the default sampler and uniform random draw
 with ``--stop-at-first`` from 5 sampler seeds; the figure is the number of simulations
 until the first violation (the violating sample's number + 1; a search that found none
 within ``CAP`` counts ``CAP + 1``, which only flatters the sampler that missed). Goal: the
-default sampler's median >= 3x
-fewer simulations than uniform random's. Measured (tpe / random medians, seeds 0-4):
-fault_slow_scanner 23 / 121 (5.3x), fault_short_field 18 / 121 (6.7x), fault_blind_policy
-22 / 121 (5.5x); docs/falsification.md has the seeds and the other samplers. About
-40 minutes on 2 cores (random runs most seeds to ``CAP``).
+default sampler's median >= 3x fewer simulations than uniform random's. Measured (tpe /
+random medians, seeds 0-4): fault_slow_scanner 23 / 121 (5.3x), fault_short_field 18 / 121
+(6.7x), fault_blind_policy 22 / 121 (5.5x); docs/falsification.md has the seeds and the
+other samplers. About 40 minutes on 2 cores (random runs most seeds to ``CAP``).
 
 **Ray.** The occlusion scenario's search with the default budget (50 samples) on 1 and on
 2 Ray workers, each command timed whole. Goal: >= 1.7x.
