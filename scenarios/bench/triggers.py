@@ -88,7 +88,8 @@ class Crossing:
 
     ``s`` is the arc length of the crossing on the vehicle's path, ``walk`` the distance
     from the first waypoint to it along the route, ``sine`` and ``cosine`` the crossing
-    leg's angle to the path.
+    leg's angle to the path; ``front`` how far the vehicle's front is ahead of its
+    reference point (m).
     """
 
     person: PersonSpec
@@ -97,6 +98,11 @@ class Crossing:
     walk: float
     sine: float
     cosine: float
+    front: float
+
+    def ahead(self, progress):
+        """Return how far (m) the front is before the crossing at ``progress`` (or array)."""
+        return self.s - (progress + self.front)
 
 
 class PersonTriggers:
@@ -131,7 +137,8 @@ class PersonTriggers:
                 raise ValueError(f"person {person.name}: no vehicle named "
                                  f"{person.trigger_vehicle!r} to trigger on")
             s, walk, sine, cosine = crossing_on_path(vehicle.path, person.waypoints)
-            crossings.append(Crossing(person, vehicle, s, walk, sine, cosine))
+            front = float(np.asarray(vehicle.robot.footprint)[:, 0].max())
+            crossings.append(Crossing(person, vehicle, s, walk, sine, cosine, front))
         return crossings
 
     def __bool__(self) -> bool:
@@ -181,9 +188,8 @@ class PersonTriggers:
             if already or not person.acts_in(lap):
                 ticks[person.name] = None
                 continue
-            front = float(np.asarray(crossing.vehicle.robot.footprint)[:, 0].max())
             with np.errstate(invalid="ignore"):
-                fire = self._fires(crossing, crossing.s - (progress + front))
+                fire = self._fires(crossing, crossing.ahead(progress))
             fire &= ~np.isnan(progress)
             first = np.flatnonzero(fire)
             ticks[person.name] = int(first[0]) if first.size else None
@@ -207,8 +213,7 @@ class PersonTriggers:
                 continue
             if (lap is not None and not person.acts_in(lap)) or person.name in self.held:
                 continue
-            front = float(np.asarray(vehicle.robot.footprint)[:, 0].max())
-            if self._fires(crossing, crossing.s - (vehicle.follower.progress + front)):
+            if self._fires(crossing, crossing.ahead(vehicle.follower.progress)):
                 self.fired[person.name] = t
         return self.fired
 

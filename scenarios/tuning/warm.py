@@ -106,7 +106,7 @@ class WarmStart:
         bench.reset()
         while bench.lap < lap:
             bench.step()
-        self._checkpoints: list[tuple[int, BenchState]] = [(0, bench.save_state())]
+        self._checkpoints: dict[int, BenchState] = {0: bench.save_state()}  # by tick
         self._progress = np.empty(0)
         triggers = bench.scene.triggers
         if triggers is not None:
@@ -152,7 +152,7 @@ class WarmStart:
             raise ValueError(f"WarmStart: {spec.name} differs from {self.spec.name} in "
                              f"more than the people of lap {self.lap} on: {'; '.join(found)}")
         bench = self._bench
-        bench.restore_state(dict(self._checkpoints)[self.start_tick(spec)])
+        bench.restore_state(self._checkpoints[self.start_tick(spec)])
         bench.replace_people(spec)
         return summarize(bench.run())
 
@@ -177,12 +177,12 @@ class WarmStart:
         fires = [tick for tick in triggers.fire_ticks(self._progress, self.lap).values()
                  if tick is not None]
         diverges = min(fires, default=len(self._progress))
-        return max(tick for tick, _ in self._checkpoints if tick <= diverges)
+        return max(tick for tick in self._checkpoints if tick <= diverges)
 
     def close(self) -> None:
         """Free the saved state and the PyBullet server; safe to call twice."""
         if self._bench.sim is not None:
-            for _, state in self._checkpoints:
+            for state in self._checkpoints.values():
                 self._bench.release_state(state)
             self._bench.close()
 
@@ -208,7 +208,7 @@ class WarmStart:
         saved_at = bench.sim_time
         while not bench.done and bench.lap == self.lap:
             if bench.sim_time - saved_at >= CHECKPOINT_S - 1e-9:
-                self._checkpoints.append((len(progress), bench.save_state()))
+                self._checkpoints[len(progress)] = bench.save_state()
                 saved_at = bench.sim_time
             idle = vehicle.done or vehicle.waiting
             progress.append(math.nan if idle else vehicle.follower.progress)
