@@ -40,6 +40,7 @@ from robots.safety import SafetyOutput, SafetyPolicy, SafetySupervisor
 from robots.stopping import minimum_protective_field
 from scenarios.bench.bundled_policies import field_policy
 from scenarios.bench.policies import FieldView, checked_readings, counted_occupancy
+from scenarios.bench.records import AppliedFields
 from scenarios.spec.field_sizing import field_checks, required_size, stop_model
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments
@@ -98,6 +99,7 @@ class VehicleFields:
         # The seeded latency in whole scans: the supervisor only answers at scans.
         self._latency_scans = round(faults.scanner_latency_s * spec.rates.safety_hz)
         self._pending: deque[SafetyOutput] = deque()
+        self._judged: tuple | None = None  # the last scan's fields, for applied()
 
     def reset(self, segment: PathSegment, stamp: float) -> None:
         """Start a lap at rest on ``segment`` at time ``stamp``."""
@@ -147,8 +149,29 @@ class VehicleFields:
             if not 0.0 <= cap <= 1.0:
                 raise ValueError(f"policy {policy.name!r}: speed_cap(view) must be in [0, 1], "
                                  f"got {cap!r}")
-            return SafetyOutput(cap, output.zone)
+            output = SafetyOutput(cap, output.zone)
+        self._judged = (segment, minimum, points, readings, output.zone)
         return output
+
+    def applied(self, speed_scale: float) -> AppliedFields:
+        """Return the fields the last :meth:`supervise` judged against (for recordings).
+
+        ``speed_scale`` is what reached the vehicle (:meth:`reaching_vehicle`). Built only
+        when an observer asks for it: the run itself never needs these arrays.
+        """
+        segment, minimum, points, readings, zone = self._judged
+        mask = None if readings is None else readings.protective
+        ignored = points[~mask] if mask is not None else np.zeros((0, 2))
+        outline = np.zeros((0, 2))
+        if self._guarded and not minimum.is_empty:
+            # The union of a rectangle and a buffered footprint: one polygon in practice.
+            shell = minimum if minimum.geom_type == "Polygon" else minimum.convex_hull
+            outline = shapely.get_coordinates(shell.exterior)[:-1]
+        return AppliedFields(
+            warning=np.asarray(segment.fields.warning, dtype=float),
+            protective=np.asarray(segment.fields.protective, dtype=float),
+            minimum=outline, ignored=ignored, zone=zone, speed_scale=float(speed_scale),
+        )
 
     def reaching_vehicle(self, output: SafetyOutput) -> SafetyOutput:
         """Return the answer that reaches the vehicle now, ``output`` being the latest.

@@ -12,24 +12,15 @@ import numpy as np
 
 from scenarios.bench.observer import Observer
 from scenarios.bench.records import ScanRecord
+from semistatic.colours import FIELD_COLOURS, RETURNS_COLOUR, STATUS_COLOURS
 from semistatic.frames import transform_points
 from sim.debug_view import DebugView
 
-__all__ = ["GUI_REFRESH_HZ", "STATUS_COLOURS", "GuiView"]
+__all__ = ["GUI_REFRESH_HZ", "GuiView"]
 
 GUI_REFRESH_HZ = 4.0
 """Redraws per simulated second of the GUI's debug items (each redraw costs a frame)."""
 
-STATUS_COLOURS = {
-    "new": (0.1, 0.45, 1.0),
-    "confirmed": (0.0, 0.65, 0.0),
-    "blank": (0.55, 0.55, 0.55),
-}
-"""Colour (RGB) of a local-map polyline by its life-cycle status."""
-
-WARNING_COLOUR = (1.0, 0.6, 0.0)
-PROTECTIVE_COLOUR = (0.9, 0.0, 0.0)
-RETURNS_COLOUR = (0.75, 0.0, 0.75)
 
 
 class GuiView(Observer):
@@ -39,7 +30,7 @@ class GuiView(Observer):
     and the debug items are redrawn: the current segment's warning (orange) and
     protective (red) fields where the EKF places the robot, the last safety scan's
     returns (magenta) and every local map's polylines, coloured by life-cycle status
-    (:data:`STATUS_COLOURS`). Headless, it draws nothing.
+    (:data:`~semistatic.colours.STATUS_COLOURS`). Headless, it draws nothing.
 
     Examples
     --------
@@ -81,7 +72,7 @@ class GuiView(Observer):
         view.draw_polylines(
             "fields",
             [transform_points(pose, fields.warning), transform_points(pose, fields.protective)],
-            [WARNING_COLOUR, PROTECTIVE_COLOUR],
+            [FIELD_COLOURS["warning"], FIELD_COLOURS["protective"]],
             closed=True,
         )
         view.draw_points("returns", self._returns, RETURNS_COLOUR)

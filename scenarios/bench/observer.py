@@ -18,8 +18,10 @@ the Testbench itself (the view of its first vehicle, which also lets a script mo
 one added for a fleet vehicle receives that vehicle; a recording's replay hands its own
 view to the scoring observers. Observers read; they must not drive the robot.
 
-``on_scan`` records carry the segment's whole map (``record.polylines``) only when an
-observer of the vehicle sets ``wants_polylines = True``: building it costs at every scan.
+``on_scan`` records carry the segment's whole map (``record.polylines`` with their
+``polyline_status``) and the fields the scan was judged against (``record.fields``) only
+when an observer of the vehicle sets ``wants_polylines = True``: building them costs at
+every scan.
 
 Examples
 --------
@@ -164,7 +166,7 @@ class Observer:
     """
 
     wants_polylines: bool = False
-    """Whether ``on_scan`` reads ``record.polylines`` (the segment's map, built per scan)."""
+    """Whether ``on_scan`` reads ``record.polylines`` and ``record.fields`` (built per scan)."""
 
     def on_lap_start(self, vehicle: VehicleView, lap: int) -> None:
         """Prepare for lap ``lap``: the vehicle stands re-localised at its start."""

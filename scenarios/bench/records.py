@@ -20,7 +20,7 @@ from semistatic.mapper import UpdateReport
 from semistatic.types import Scan
 from worlds.spec import WorldSpec
 
-__all__ = ["LapLog", "RunLog", "ScanRecord", "combine_logs"]
+__all__ = ["AppliedFields", "LapLog", "RunLog", "ScanRecord", "combine_logs"]
 
 
 @dataclass
@@ -52,6 +52,43 @@ class LapLog:
 
 
 @dataclass(frozen=True, eq=False)
+class AppliedFields:
+    """The safety fields as one scan was judged against them, robot frame (x ahead, y left).
+
+    Parameters
+    ----------
+    warning, protective
+        The segment's warning and protective field polygons, ``(N, 2)`` each.
+    minimum
+        The outline ``(M, 2)`` of the minimum protective field at the measured speed:
+        readings inside it count whatever the policy answers (``(0, 2)`` with the seeded
+        fault ``faults.unguarded_minimum_field``).
+    ignored
+        ``(K, 2)`` readings the field policy did not count for the protective field
+        (the adaptive policies' readings explained by the local map).
+    zone
+        The supervisor's zone after the scan: ``clear``, ``warning`` or ``protective``.
+    speed_scale
+        The speed factor that reached the vehicle (1 free, 0 stopped).
+
+    Examples
+    --------
+    >>> square = np.array([[0.0, -0.5], [1.0, -0.5], [1.0, 0.5], [0.0, 0.5]])
+    >>> fields = AppliedFields(warning=2 * square, protective=square, minimum=square / 2,
+    ...                        ignored=np.zeros((0, 2)), zone="clear", speed_scale=1.0)
+    >>> fields.zone, fields.minimum.shape
+    ('clear', (4, 2))
+    """
+
+    warning: np.ndarray
+    protective: np.ndarray
+    minimum: np.ndarray
+    ignored: np.ndarray
+    zone: str
+    speed_scale: float
+
+
+@dataclass(frozen=True, eq=False)
 class ScanRecord:
     """What the robot knew when one safety-laser scan reached the mapper (for recording).
 
@@ -78,6 +115,12 @@ class ScanRecord:
     report
         The :class:`~semistatic.mapper.UpdateReport` of the local-map update (its scan
         polylines are in the segment frame), or ``None``.
+    polyline_status
+        The life-cycle status of each of ``polylines`` (``new``, ``confirmed`` or
+        ``blank``), in the same order.
+    fields
+        The :class:`AppliedFields` the scan was judged against, or ``None`` (a replayed
+        real log has no safety fields).
 
     Examples
     --------
@@ -98,6 +141,8 @@ class ScanRecord:
     polylines: tuple[np.ndarray, ...] = ()
     sensor_pose: np.ndarray | None = None
     report: UpdateReport | None = None
+    polyline_status: tuple[str, ...] = ()
+    fields: AppliedFields | None = None
 
 
 @dataclass

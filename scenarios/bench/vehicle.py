@@ -418,6 +418,9 @@ class Vehicle:
         started = time.perf_counter()
         report = local_map.update(scan, sensor_world)
         self.log.mapper_seconds.append(time.perf_counter() - started)
+        # Reading the whole map and the fields costs; only observers that read them pay.
+        wants = self.observers.wants_polylines
+        lines = local_map.world_polylines() if wants else {}
         return ScanRecord(
             lap=self.lap_log.lap,
             segment=segment.name,
@@ -425,12 +428,11 @@ class Vehicle:
             odom_pose=self.odom_pose.copy(),
             ekf_pose=ekf_pose,  # the EKF returns copies
             ekf_covariance=self.ekf.covariance,
-            # Reading the whole map costs; only observers that may read it pay for it.
-            polylines=tuple(line.points for line in local_map.world_polylines().values())
-            if self.observers.wants_polylines
-            else (),
+            polylines=tuple(line.points for line in lines.values()),
             sensor_pose=sensor_world,
             report=report,
+            polyline_status=tuple(local_map[map_id].status for map_id in lines),
+            fields=self.fields.applied(self.speed_scale) if wants else None,
         )
 
     def _fetch(self, name: str, local_map: LocalMap) -> None:
