@@ -21,6 +21,7 @@ __all__ = [
     "EKF_COLOUR",
     "FIELD_COLOURS",
     "PERSON_COLOUR",
+    "POLYLINE_COLOUR",
     "POST_COLOUR",
     "RETURNS_COLOUR",
     "STATUS_COLOURS",
@@ -38,6 +39,9 @@ STATUS_COLOURS: dict[str, Colour] = {
     "blank": (0.55, 0.55, 0.55),
 }
 """A local-map polyline by its life-cycle status (:mod:`semistatic.local_map`)."""
+
+POLYLINE_COLOUR: Colour = (0.9, 0.8, 0.1)
+"""A map polyline whose status is not known (a ROS bag frame written without statuses)."""
 
 FIELD_COLOURS: dict[str, Colour] = {
     "warning": (1.0, 0.6, 0.0),

@@ -18,6 +18,7 @@ import argparse
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -111,11 +112,13 @@ def draw_posts(ax: Axes, posts: Iterable[PostSpec], *, color: str = COLORS["post
         ax.add_patch(Circle(post.xy, radius, color=color, zorder=4))
 
 
-def draw_box(ax: Axes, corners: ArrayLike, name: str, *, outline: bool = False) -> None:
+def draw_box(ax: Axes, corners: ArrayLike, name: str, *, outline: bool = False,
+             color: Any = COLORS["box"]) -> None:
     """Draw a semi-static box footprint ``corners`` (4, 2) and its ``name`` below it.
 
-    A filled brown box by default; with ``outline`` only a dashed brown outline over a
-    faint fill, so that lines drawn on top (a map of the box) stay visible.
+    A filled box by default; with ``outline`` only a dashed outline over a faint fill,
+    so that lines drawn on top (a map of the box) stay visible. ``color`` is any
+    matplotlib colour (brown by default).
 
     Examples
     --------
@@ -127,10 +130,10 @@ def draw_box(ax: Axes, corners: ArrayLike, name: str, *, outline: bool = False) 
     """
     corners = np.asarray(corners, dtype=float)
     if outline:
-        style = {"facecolor": (*to_rgb(COLORS["box"]), 0.15), "edgecolor": COLORS["box"]}
+        style = {"facecolor": (*to_rgb(color), 0.15), "edgecolor": color}
         style |= {"linestyle": "--", "linewidth": 1.2}
     else:
-        style = {"facecolor": COLORS["box"], "edgecolor": "black", "alpha": 0.8}
+        style = {"facecolor": color, "edgecolor": "black", "alpha": 0.8}
     ax.add_patch(Polygon(corners, closed=True, zorder=4, **style))
     ax.annotate(
         name,
@@ -139,7 +142,7 @@ def draw_box(ax: Axes, corners: ArrayLike, name: str, *, outline: bool = False) 
         xytext=(0, -18),
         ha="center",
         fontsize=7,
-        color=COLORS["box"],
+        color=color,
         bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 0.5},
         zorder=6,
     )

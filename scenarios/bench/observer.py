@@ -14,9 +14,10 @@ the model). Each hook does nothing by default; a subclass overrides the ones it 
 The first argument of every hook is a :class:`VehicleView`: the read-only view of the
 running vehicle the observer watches. An observer added with
 :meth:`Testbench.add_observer <scenarios.bench.testbench.Testbench.add_observer>` receives
-the Testbench itself (the view of its first vehicle, which also lets a script move boxes);
-one added for a fleet vehicle receives that vehicle; a recording's replay hands its own
-view to the scoring observers. Observers read; they must not drive the robot.
+the Testbench itself (the view of its first vehicle, which also lets a script move boxes),
+or, when it sets ``every_vehicle = True`` (a recording of the whole fleet), each vehicle
+of the fleet in turn; one added for a fleet vehicle receives that vehicle; a recording's
+replay hands its own view to the scoring observers. Observers read; they must not drive the robot.
 
 ``on_scan`` records carry the segment's whole map (``record.polylines`` with their
 ``polyline_status``) and the fields the scan was judged against (``record.fields``) only
@@ -46,6 +47,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from robots.presets import UGVSpec
 from scenarios.bench.records import LapLog, RunLog, ScanRecord
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment
@@ -111,6 +113,8 @@ class VehicleView(Protocol):
         The speed factor the safety fields impose (1 free, 0 stopped).
     person_positions : Mapping[str, numpy.ndarray or None]
         Where each person stands now (``None``: not in the scene).
+    robot : UGVSpec
+        The vehicle's preset (footprint, lasers, wheels).
     layout_revision : int
         Changes whenever a box is moved, added or removed.
 
@@ -144,6 +148,7 @@ class VehicleView(Protocol):
     zone: str
     speed_scale: float
     person_positions: Mapping[str, np.ndarray | None]
+    robot: UGVSpec
     layout_revision: int
 
     def vehicle_outlines(self) -> list[np.ndarray]:
@@ -167,6 +172,9 @@ class Observer:
 
     wants_polylines: bool = False
     """Whether ``on_scan`` reads ``record.polylines`` and ``record.fields`` (built per scan)."""
+
+    every_vehicle: bool = False
+    """Whether a Testbench calls the hooks for every vehicle of its fleet (each its view)."""
 
     def on_lap_start(self, vehicle: VehicleView, lap: int) -> None:
         """Prepare for lap ``lap``: the vehicle stands re-localised at its start."""

@@ -36,10 +36,11 @@ def run_scenario(
 
     ``progress``, when given, is called with the simulated seconds advanced (for a
     progress bar). ``on_scan``, when given, is called once per safety-laser scan, after
-    the local map update, with a :class:`ScanRecord` (e.g. to write a ROS 2 bag with
-    ``scenarios.logs.bag``). ``observers`` are added to the bench after those (e.g. a
-    :class:`~scenarios.logs.recording.ScanRecorder`). Same spec (and seed) -> identical log and
-    records, except the timing figures.
+    the local map update, with a :class:`ScanRecord` (its map polylines and fields
+    included). ``observers`` are added to the bench after those (e.g. a
+    :class:`~scenarios.logs.bag.BagRecorder` for a ROS 2 bag or a
+    :class:`~scenarios.logs.recording.ScanRecorder`). Same spec (and seed) -> identical log
+    and records, except the timing figures.
 
     Examples
     --------

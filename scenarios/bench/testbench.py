@@ -145,7 +145,9 @@ class Testbench(SavedStates):
     def add_observer(self, observer: Observer) -> None:
         """Call ``observer``'s hooks with this bench (its first vehicle's view) from now on.
 
-        Added before :meth:`reset`, it sees lap 1 start; a reset keeps it.
+        An observer whose ``every_vehicle`` is true is called for every vehicle of the
+        fleet instead, each time with that vehicle's view. Added before :meth:`reset`, it
+        sees lap 1 start; a reset keeps it.
 
         Examples
         --------
@@ -161,6 +163,14 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         """
         self.observers.append(require_observer(observer))
         if self.scene is not None:
+            self._attach(observer)
+
+    def _attach(self, observer: Observer) -> None:
+        """Hand ``observer`` the bench (its first vehicle), or each vehicle if it asks."""
+        if observer.every_vehicle:
+            for vehicle in self.fleet:
+                vehicle.add_observer(observer, view=vehicle)
+        else:
             self.fleet[0].add_observer(observer, view=self)
 
     def reset(self, *, seed: int | None = None) -> None:
@@ -206,7 +216,7 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
             if spec.sharing:  # alone, a vehicle publishes to a store of its own
                 vehicle.add_observer(SegmentPublisher(store, vehicle.index, segment_names=names))
         for observer in self.observers:
-            self.fleet[0].add_observer(observer, view=self)
+            self._attach(observer)
         scene.add_people()
         self._clock = SensorClock(rates)
         self.done = False
@@ -330,6 +340,7 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
     world = _of_lead("world", "The simulated world (boxes as they stand now).")
     person_positions = _of_lead("person_positions", "Where the people stand now (or None).")
     layout_revision = _of_lead("layout_revision", "Changes whenever a box moves.")
+    robot = _of_lead("robot", "The first vehicle's preset (footprint, lasers, wheels).")
 
     @property
     def spec(self) -> ScenarioSpec:

@@ -16,6 +16,7 @@ budget. It writes::
                                key importance, coverage of the bins
     DIR/counterexamples/       every violation and the --k-worst worst other samples:
                                POLICY-NNNN.toml and its world, for ``semistatic run``
+                               (with --rrd also POLICY-NNNN.rrd, its Rerun recording)
     DIR/figures/*.png          best so far against simulations; failure-region maps
     DIR/worlds/*.toml          the varied worlds of world-object keys
 
@@ -41,6 +42,7 @@ import importlib.util
 import json
 from pathlib import Path
 
+from scenarios.process.errors import InputError
 from scenarios.process.staging import (
     RESULT_MARKER,
     check_resumable_dir,
@@ -118,6 +120,9 @@ def add_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentParser:
                          help="run every sample in full, even when the varied people act "
                               "only in the last laps (the metrics are the same)")
     falsify.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    falsify.add_argument("--rrd", action="store_true",
+                         help="also record every counterexample for the Rerun viewer: one more "
+                              "run each, counterexamples/POLICY-NNNN.rrd beside its file")
     return falsify
 
 
@@ -148,9 +153,46 @@ def _configs(args: argparse.Namespace, out: Path):
     return base.name, configs
 
 
+def record_counterexamples(out: Path) -> str:
+    """Record each counterexample of ``out`` once for Rerun; return a summary line.
+
+    Each ``counterexamples/STEM.toml`` is run again (its metrics are the sample's) with a
+    :class:`~scenarios.logs.rrd.RerunRecorder` writing ``STEM.rrd`` beside it; one that
+    has its recording already (a resumed search) is skipped.
+    """
+    from scenarios.bench.runner import run_scenario
+    from scenarios.falsify.report import COUNTEREXAMPLES_DIR
+    from scenarios.logs.rrd import RerunRecorder
+    from scenarios.process.progress import count_progress
+    from scenarios.spec.load import load_scenario
+
+    folder = out / COUNTEREXAMPLES_DIR
+    files = sorted(path for path in folder.glob("*.toml")
+                   if not path.name.endswith(".world.toml")) if folder.is_dir() else []
+    todo = [path for path in files if not path.with_suffix(".rrd").exists()]
+    with count_progress(len(todo), "record counterexamples", "run") as advance:
+        for path in todo:
+            spec = load_scenario(str(path))
+            recorder = RerunRecorder(path.with_suffix(".rrd"), recording_id=path.stem)
+            try:
+                run_scenario(spec, observers=(recorder,))
+            except BaseException:
+                recorder.close(finish=False)
+                raise
+            recorder.close()
+            advance(path.stem)
+    return (f"{len(files)} counterexample recordings in {folder}/ (open one with: rerun "
+            f"{folder}/NAME.rrd)")
+
+
 def main_falsify(args: argparse.Namespace) -> int:
     """Run ``semistatic falsify``; return 0, or 1 when some sample's run raised."""
     check_backend(args.backend, args.jobs, args.address)
+    if args.rrd:
+        from scenarios.logs.rrd import rerun_missing
+
+        if rerun_missing() is not None:
+            raise InputError(f"--rrd: {rerun_missing()}")
     out = args.out
     if out is None:
         out = Path("results") / f"falsify-{Path(args.scenario).stem}"
@@ -199,6 +241,8 @@ def main_falsify(args: argparse.Namespace) -> int:
             searches.append(PolicySearch(config, study))
     print(write_falsification(out, searches, bins=args.bins, k_worst=args.k_worst,
                               command=command, figures=not args.no_figures))
+    if args.rrd:
+        print(record_counterexamples(out))
     raised = [trial for search in searches for trial in finished_trials(search.study)
               if trial_status(trial)[0] == "error"]
     return 1 if raised else 0

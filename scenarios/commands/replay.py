@@ -15,6 +15,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
+from scenarios.logs.rrd import DEFAULT_VIEWER_URL, open_timeline
 from scenarios.process.errors import InputError
 from scenarios.process.progress import scan_progress
 from scenarios.process.staging import check_output_dir
@@ -48,6 +49,15 @@ def add_parser(commands: argparse._SubParsersAction) -> None:
         help="override a mapper threshold, e.g. --set mapper.gate=0.15",
     )
     replay.add_argument("--no-figures", action="store_true", help="skip the PNG figure")
+    replay.add_argument(
+        "--rrd", type=Path, metavar="FILE",
+        help="also record the replay for the Rerun viewer (FILE.rrd must not exist): scans, "
+             "poses and each place's map coloured by status, on the log's clock",
+    )
+    replay.add_argument(
+        "--viewer", nargs="?", const=DEFAULT_VIEWER_URL, metavar="URL",
+        help=f"stream the replay live to a Rerun viewer (default {DEFAULT_VIEWER_URL})",
+    )
 
 
 def _replay_params(overrides: Sequence[str], max_range: float | None):
@@ -81,18 +91,33 @@ def main_replay(args: argparse.Namespace) -> int:
         raise InputError(f"{args.log}: <file>: no such file or directory")
     name = args.log.name.split(".")[0]
     out = check_output_dir(args.out if args.out is not None else Path("results") / f"replay-{name}")
+    timeline = open_timeline(args.rrd, args.viewer, out, f"replay-{name}")
     try:
         with scan_progress(f"replay {name}") as advance:
             result = replay_log(open_log(args.log, lenient=args.lenient), options,
-                            progress=advance)
+                                progress=advance,
+                                on_scan=None if timeline is None else timeline.replayed_scan)
     except (LogFormatError, ValueError) as error:
+        if timeline is not None:
+            timeline.close(finish=False)
         raise InputError(str(error)) from None
+    except BaseException:
+        if timeline is not None:
+            timeline.close(finish=False)  # no half recording at --rrd
+        raise
     if result.quality is not None and result.quality.vertices_per_scan == 0.0:
         raise InputError(
             f"{args.log}: <file>: no polyline in any of its {result.scans} scans (are all "
             "ranges NaN, inf or beyond --max-range?); nothing to map"
         )
     metrics = write_replay_outputs(result, out, log_name=name, figures=not args.no_figures)
+    recorded = ""
+    if timeline is not None:
+        timeline.close()  # after the outputs: a recording inside --out lands in them
+        recorded = "".join(
+            [f"\nRerun recording in {args.rrd} (open it with: rerun {args.rrd})"
+             if args.rrd is not None else "",
+             f"\nstreamed to the Rerun viewer at {args.viewer}" if args.viewer else ""])
     table, quality = metrics["table1_cm"], metrics["extraction"]
     alignment = metrics["alignment"]
     aligned = ""
@@ -118,5 +143,6 @@ def main_replay(args: argparse.Namespace) -> int:
         f"  {metrics['performance']['wall_time_s']:.1f} s, "
         f"mapper {metrics['performance']['mapper_ms_median']} ms/scan\n"
         f"results in {out}/ (metrics.json, table1.csv, map.geojson, figures/)"
+        f"{recorded}"
     )
     return 0

@@ -23,6 +23,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from scenarios.logs.rrd import DEFAULT_VIEWER_URL, open_timeline
 from scenarios.process.errors import (
     EXIT_RUN_FAILED,
     InputError,
@@ -78,14 +79,27 @@ def add_parsers(commands: argparse._SubParsersAction) -> None:
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     run.add_argument(
         "--bag", type=Path, metavar="DIR",
-        help="also write the run as a ROS 2 bag directory DIR (must not exist): scans, "
-             "odometry, EKF pose, tf and the map polylines, for RViz 2 or Foxglove",
+        help="also write the run as a ROS 2 bag directory DIR (must not exist): clock, "
+             "scans, odometry, EKF pose, tf (map, odom, base_link, laser), the map "
+             "polylines coloured by status, the safety fields, people and boxes, for "
+             "RViz 2 (fixed frame map) or Foxglove",
     )
     run.add_argument(
         "--bag-storage", choices=BAG_STORAGE_CHOICES, default="sqlite3",
         help="storage of the --bag (default sqlite3, ROS 2 Humble's; mcap for Foxglove)",
     )
 
+    run.add_argument(
+        "--rrd", type=Path, metavar="FILE",
+        help="also record the run on a timeline for the Rerun viewer (FILE.rrd must not "
+             "exist): the map top-down with fields, scans, maps and people, time series and "
+             "events (needs the rerun extra: pip install 'semistatic[rerun]')",
+    )
+    run.add_argument(
+        "--viewer", nargs="?", const=DEFAULT_VIEWER_URL, metavar="URL",
+        help="stream the run live to a Rerun viewer (start `rerun` first; default "
+             f"{DEFAULT_VIEWER_URL})",
+    )
     run.add_argument(
         "--record", type=Path, metavar="DIR",
         help="also record what the mapper and the scoring saw (DIR must not exist), for "
@@ -218,10 +232,17 @@ def main_run(args: argparse.Namespace) -> int:
     if args.record is not None:
         check_new_recording_path(args.record)
         scan_recorder = ScanRecorder()
+    timeline = open_timeline(args.rrd, args.viewer, out, f"{spec.name}-seed{spec.seed}")
+    observers = [observer for observer in (recorder, scan_recorder, timeline)
+                 if observer is not None]
     total = estimated_sim_time(spec, world)
-    with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
-        log = run_scenario(spec, gui=args.gui, progress=bar, on_scan=recorder,
-                           observers=(scan_recorder,) if scan_recorder else ())
+    try:
+        with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
+            log = run_scenario(spec, gui=args.gui, progress=bar, observers=observers)
+    except BaseException:
+        if timeline is not None:
+            timeline.close(finish=False)  # no half recording at --rrd
+        raise
     comparison = None
     if args.compare:
         comparison = {}
@@ -243,12 +264,21 @@ def main_run(args: argparse.Namespace) -> int:
     if scan_recorder is not None:
         scan_recorder.write(args.record, spec, metrics)
         summary += f"\nrecording in {args.record}/ ({scan_recorder.scans} scans)"
+    if timeline is not None:
+        # After the outputs too: a recording inside --out lands in the published directory.
+        timeline.close()
+        scans = sum(timeline.scans.values())
+        if args.rrd is not None:
+            summary += (f"\nRerun recording in {args.rrd} ({scans} scans; open it with: "
+                        f"rerun {args.rrd})")
+        if args.viewer is not None:
+            summary += f"\nstreamed {scans} scans to the Rerun viewer at {args.viewer}"
     if recorder is not None:
         # After the outputs, so that a bag inside --out finds its parent directory.
         write_run_bag(args.bag, recorder.frames, log.robot, storage=args.bag_storage)
         summary += (
             f"\nROS 2 bag in {args.bag}/ ({args.bag_storage}, {len(recorder.frames)} scans; "
-            f"topics {', '.join(BAG_TOPICS)})"
+            f"topics {', '.join(BAG_TOPICS)}; RViz 2 fixed frame map, play with --clock)"
         )
     print(summary)
     failures = metrics["safety"]["failed_laps"]

@@ -330,8 +330,14 @@ def replay_log(
     options: ReplayOptions | None = None,
     *,
     progress: Callable[[int], None] | None = None,
+    on_scan: Callable[[Scan, np.ndarray, LocalMap], None] | None = None,
 ) -> ReplayResult:
-    """Run extraction, association, merge and join over ``scans`` into per-place maps."""
+    """Run extraction, association, merge and join over ``scans`` into per-place maps.
+
+    ``on_scan``, when given, is called after each replayed scan with the scan, the laser
+    pose the mapper used (aligned on a revisit) and the place's map (e.g.
+    :meth:`scenarios.logs.rrd.RerunRecorder.replayed_scan`).
+    """
     options = ReplayOptions() if options is None else options
     started = time.perf_counter()
     scans = iter(scans)
@@ -374,6 +380,8 @@ def replay_log(
         report = (tile.map.associate(scan, pose, find_missed=False) if tile.frozen
                   else tile.map.update(scan, pose))
         result.mapper_seconds.append(time.perf_counter() - clock)
+        if on_scan is not None:
+            on_scan(scan, pose, tile.map)
         if tile.frozen:
             result.revisit_scans += 1
             for pair in report.associated:

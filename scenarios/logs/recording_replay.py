@@ -145,6 +145,7 @@ class ReplayedVehicle:
         self.local_maps = MappingProxyType(self._local_maps)
         self.log = RunLog(spec=spec, world=setting.worlds[0], robot=robot_preset(spec.robot),
                           segments=self.segments)
+        self.robot = self.log.robot
         self._base_world = setting.worlds[0]
         self._layouts = setting.layouts
         self.layout_revision = -1

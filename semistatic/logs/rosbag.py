@@ -15,16 +15,37 @@ Reading (:func:`read_bag`)
     Header stamps of zero fall back to the bag's receive time.
 
 Writing (:func:`write_ros2_bag`)
-    One :class:`BagFrame` per scan: the scan on ``/scan`` (frame ``laser``), the
-    odometry and the EKF poses as ``nav_msgs/Odometry`` on ``/odom`` and ``/ekf/odom``
-    (frame ``map``, child ``base_link``; the EKF covariance, when given, fills the x,
-    y and yaw entries), the transform tree ``map -> base_link`` on ``/tf`` from the EKF
-    pose (the pose the mapper works with) and ``base_link -> laser`` once on
-    ``/tf_static`` (transient-local) from ``laser_offset``, and the polylines as
-    ``visualization_msgs/MarkerArray`` LINE_STRIP markers on ``/semistatic/polylines``
-    (a DELETEALL first, so each message replaces the previous map). RViz 2 (fixed frame
-    ``map``) and Foxglove open the result. The scan's own ``pose`` is not stored: reading
-    the bag back with ``odom_topic=EKF_TOPIC`` gives ``compose(ekf_pose, laser_offset)``.
+    One :class:`BagFrame` per scan, every message stamped with the scan's stamp, the
+    frames as REP-105 names them (``map -> odom -> base_link -> laser``):
+
+    - ``/clock`` ``rosgraph_msgs/Clock``: the stamp, so that ``ros2 bag play --clock``
+      gives ``use_sim_time`` nodes the simulation's clock;
+    - ``/scan`` ``sensor_msgs/LaserScan``, frame ``laser``, with the frame's
+      ``scan_time`` (0: unknown) and ``time_increment`` (0: all beams at one instant,
+      or unknown);
+    - ``/odom`` ``nav_msgs/Odometry``: the wheel-odometry pose, frame ``odom``, child
+      ``base_link``;
+    - ``/ekf/odom`` ``nav_msgs/Odometry``: the EKF pose, frame ``map``, child
+      ``base_link`` (the EKF covariance, when given, fills the x, y and yaw entries);
+    - ``/tf``: ``map -> odom`` (``ekf_pose ⊕ ⊖odom_pose``, the odometry's drift as the
+      EKF sees it) and ``odom -> base_link`` (``odom_pose``), so that ``map ->
+      base_link`` is the EKF pose, the pose the mapper works with; ``/tf_static``:
+      ``base_link -> laser`` once (transient-local) from ``laser_offset``;
+    - ``/semistatic/polylines`` ``visualization_msgs/MarkerArray``: one LINE_STRIP per
+      map polyline, frame ``map``, in its status's colour
+      (:data:`~semistatic.colours.STATUS_COLOURS`, namespace the status);
+    - ``/semistatic/fields/warning``, ``.../protective``, ``.../minimum``
+      ``geometry_msgs/PolygonStamped``, frame ``base_link``: the safety fields the scan
+      was judged against, for frames that carry them;
+    - ``/semistatic/people`` and ``/semistatic/boxes`` ``visualization_msgs/MarkerArray``,
+      frame ``map``: a CYLINDER per person and a CUBE per box, where they truly are, for
+      frames that carry them.
+
+    Each MarkerArray starts with a DELETEALL, so each message replaces the previous
+    one. A topic whose data no frame carries is not created. RViz 2 (fixed frame
+    ``map``) and Foxglove open the result. The scan's own ``pose`` is not stored:
+    reading the bag back with ``odom_topic=EKF_TOPIC`` gives
+    ``compose(ekf_pose, laser_offset)``.
 
 Examples
 --------
@@ -47,7 +68,7 @@ import os
 import shutil
 import tempfile
 import warnings
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,17 +88,32 @@ from rosbags.interfaces import (
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from semistatic.frames import compose, wrap_angle
+from semistatic.colours import (
+    BOX_COLOUR,
+    PERSON_COLOUR,
+    POLYLINE_COLOUR,
+    STATUS_COLOURS,
+    Colour,
+)
+from semistatic.frames import compose, inverse, wrap_angle
 from semistatic.types import Scan
 
 __all__ = [
+    "BOX_TOPIC",
+    "CLOCK_TOPIC",
     "EKF_TOPIC",
+    "FIELD_NAMES",
+    "FIELD_TOPICS",
     "MARKER_TOPIC",
     "ODOM_TOPIC",
+    "PEOPLE_TOPIC",
     "SCAN_TOPIC",
+    "TF_STATIC_TOPIC",
     "TF_TOPIC",
+    "BagBox",
     "BagError",
     "BagFrame",
+    "BagPerson",
     "BagStats",
     "read_bag",
     "write_ros2_bag",
@@ -89,7 +125,14 @@ EKF_TOPIC = "/ekf/odom"
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 MARKER_TOPIC = "/semistatic/polylines"
+CLOCK_TOPIC = "/clock"
+FIELD_NAMES = ("warning", "protective", "minimum")
+"""The safety fields a :class:`BagFrame` may carry, in the order their topics are listed."""
+FIELD_TOPICS = {name: f"/semistatic/fields/{name}" for name in FIELD_NAMES}
+PEOPLE_TOPIC = "/semistatic/people"
+BOX_TOPIC = "/semistatic/boxes"
 MAP_FRAME = "map"
+ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
 LASER_FRAME = "laser"
 
@@ -97,14 +140,17 @@ LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+POLYGON_STAMPED = "geometry_msgs/msg/PolygonStamped"
+CLOCK = "rosgraph_msgs/msg/Clock"
 
 # A scan further than this (s) from any odometry message gets no pose and is skipped:
 # a few odometry periods at the usual 10-50 Hz.
 DEFAULT_MAX_POSE_GAP = 0.25
 NANOSECONDS = 1_000_000_000
-# LINE_STRIP width in metres and colour (RGBA): thin orange lines read well over scans.
+# LINE_STRIP width in metres: thin lines read well over the scan's points.
 MARKER_LINE_WIDTH = 0.03
-MARKER_COLOR = (1.0, 0.55, 0.0, 1.0)
+# Boxes and people are drawn half transparent: the scan points on their faces stay visible.
+SOLID_ALPHA = 0.5
 # Odometry covariance is 6x6 over (x, y, z, roll, pitch, yaw); the planar entries.
 PLANAR_COVARIANCE_INDICES = (0, 1, 5)
 STORAGES = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
@@ -154,6 +200,85 @@ class BagStats:
     without_pose: int = 0
 
 
+def _finite_vector(owner: str, value: ArrayLike, length: int, what: str) -> np.ndarray:
+    vector = np.array(value, dtype=np.float64).reshape(-1)
+    if vector.shape != (length,) or not np.isfinite(vector).all():
+        raise ValueError(f"{owner} must be a finite {what}, got {vector}")
+    return vector
+
+
+def _positive(owner: str, value: float) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{owner} must be a finite length > 0 m, got {value}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class BagBox:
+    """A box as it truly stands in the world, for the ``/semistatic/boxes`` markers.
+
+    Parameters
+    ----------
+    name
+        The box's name.
+    pose
+        ``(x, y, yaw)`` of the box centre on the floor, map frame (m, m, rad).
+    size
+        ``(sx, sy, sz)`` edges of the box (m, each > 0).
+
+    Examples
+    --------
+    >>> BagBox("carton", pose=(2.6, -1.0, 0.0), size=(0.5, 0.4, 0.6)).size
+    array([0.5, 0.4, 0.6])
+    """
+
+    name: str
+    pose: np.ndarray
+    size: np.ndarray
+
+    def __post_init__(self) -> None:
+        owner = f"BagBox {self.name!r}"
+        object.__setattr__(self, "pose", _finite_vector(f"{owner}.pose", self.pose, 3,
+                                                        "(x, y, yaw)"))
+        size = _finite_vector(f"{owner}.size", self.size, 3, "(sx, sy, sz)")
+        for edge in size:
+            _positive(f"{owner}.size", edge)
+        object.__setattr__(self, "size", size)
+
+
+@dataclass(frozen=True, eq=False)
+class BagPerson:
+    """A person where they truly stand, for the ``/semistatic/people`` markers.
+
+    Parameters
+    ----------
+    name
+        The person's name.
+    position
+        ``(x, y)`` of the body's centre on the floor, map frame (m).
+    radius, height
+        The body cylinder (m, each > 0).
+
+    Examples
+    --------
+    >>> BagPerson("walker", position=(1.0, 2.0), radius=0.25, height=1.75).position
+    array([1., 2.])
+    """
+
+    name: str
+    position: np.ndarray
+    radius: float = 0.25
+    height: float = 1.75
+
+    def __post_init__(self) -> None:
+        owner = f"BagPerson {self.name!r}"
+        object.__setattr__(self, "position", _finite_vector(f"{owner}.position",
+                                                            self.position, 2, "(x, y)"))
+        object.__setattr__(self, "radius", _positive(f"{owner}.radius", self.radius))
+        object.__setattr__(self, "height", _positive(f"{owner}.height", self.height))
+
+
 @dataclass(frozen=True, eq=False)
 class BagFrame:
     """One scan of a mapper run, with what RViz or Foxglove should show beside it.
@@ -164,19 +289,37 @@ class BagFrame:
         The laser scan; its ``stamp`` (s, >= 0) stamps every message of the frame.
         It is shown at the EKF pose composed with the writer's ``laser_offset``.
     odom_pose, ekf_pose
-        ``(x, y, theta)`` of the robot from wheel odometry and from the EKF, map frame.
+        ``(x, y, theta)`` of the robot from wheel odometry and from the EKF. The EKF
+        pose is in the map frame; the odometry pose in the ``odom`` frame, whose origin
+        is the map's (odometry is integrated in map coordinates; the two drift apart).
     polylines
         Map polylines in the world frame, each an ``(N, 2)`` array with ``N >= 2``.
     ekf_covariance
         Optional ``(3, 3)`` covariance of the EKF pose over ``(x, y, theta)``.
+    polyline_status
+        The life-cycle status of each polyline (``new``, ``confirmed`` or ``blank``), in
+        the order of ``polylines``; empty: not known (drawn in
+        :data:`~semistatic.colours.POLYLINE_COLOUR`).
+    fields
+        The safety fields the scan was judged against, robot frame (x ahead, y left):
+        ``{"warning": (N, 2), "protective": (N, 2), "minimum": (M, 2)}`` (``M`` may be 0:
+        no minimum field); None: none (a replayed real log).
+    people, boxes
+        The people (:class:`BagPerson`) and boxes (:class:`BagBox`) in the scene, where
+        they truly are; None: not known (no markers written).
+    scan_time
+        The time between two scans of this laser (s); 0: unknown.
+    time_increment
+        The time between two beams of the scan (s); 0: all beams at one instant, or
+        unknown. The beams of one scan fit into one scan time.
 
     Examples
     --------
     >>> scan = Scan(ranges=[1.0, 2.0], angle_min=0.0, angle_increment=0.1)
     >>> frame = BagFrame(scan=scan, odom_pose=(0, 0, 0), ekf_pose=(0, 0, 0),
-    ...                  polylines=[[[0, 0], [1, 0]]])
-    >>> frame.polylines[0].shape
-    (2, 2)
+    ...                  polylines=[[[0, 0], [1, 0]]], polyline_status=["new"])
+    >>> frame.polylines[0].shape, frame.polyline_status
+    ((2, 2), ('new',))
     """
 
     scan: Scan
@@ -184,6 +327,12 @@ class BagFrame:
     ekf_pose: np.ndarray
     polylines: Sequence[np.ndarray] = field(default_factory=tuple)
     ekf_covariance: np.ndarray | None = None
+    polyline_status: Sequence[str] = field(default_factory=tuple)
+    fields: Mapping[str, ArrayLike] | None = None
+    people: Sequence[BagPerson] | None = None
+    boxes: Sequence[BagBox] | None = None
+    scan_time: float = 0.0
+    time_increment: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.scan, Scan):
@@ -194,10 +343,9 @@ class BagFrame:
                 "bag timestamps are unsigned nanoseconds"
             )
         for name in ("odom_pose", "ekf_pose"):
-            pose = np.array(getattr(self, name), dtype=np.float64).reshape(-1)
-            if pose.shape != (3,) or not np.isfinite(pose).all():
-                raise ValueError(f"BagFrame.{name} must be a finite (x, y, theta), got {pose}")
-            object.__setattr__(self, name, pose)
+            object.__setattr__(self, name, _finite_vector(f"BagFrame.{name}",
+                                                          getattr(self, name), 3,
+                                                          "(x, y, theta)"))
         polylines = []
         for index, line in enumerate(self.polylines):
             points = np.array(line, dtype=np.float64)
@@ -216,6 +364,61 @@ class BagFrame:
                     f"got shape {covariance.shape}"
                 )
             object.__setattr__(self, "ekf_covariance", covariance)
+        self._check_status()
+        self._check_fields()
+        for name, kind in (("people", BagPerson), ("boxes", BagBox)):
+            items = getattr(self, name)
+            if items is None:
+                continue
+            items = tuple(items)
+            for index, item in enumerate(items):
+                if not isinstance(item, kind):
+                    raise TypeError(f"BagFrame.{name}[{index}] must be a {kind.__name__}, "
+                                    f"got {type(item).__name__}")
+            object.__setattr__(self, name, items)
+        self._check_timing()
+
+    def _check_status(self) -> None:
+        status = tuple(self.polyline_status)
+        if status and len(status) != len(self.polylines):
+            raise ValueError(
+                f"BagFrame.polyline_status must give one status per polyline "
+                f"({len(self.polylines)}), got {len(status)}"
+            )
+        unknown = sorted(set(status) - set(STATUS_COLOURS))
+        if unknown:
+            raise ValueError(f"BagFrame.polyline_status: unknown status {unknown}; "
+                             f"one of {sorted(STATUS_COLOURS)}")
+        object.__setattr__(self, "polyline_status", status)
+
+    def _check_fields(self) -> None:
+        if self.fields is None:
+            return
+        if sorted(self.fields) != sorted(FIELD_NAMES):
+            raise ValueError(f"BagFrame.fields must have the keys {list(FIELD_NAMES)}, "
+                             f"got {sorted(self.fields)}")
+        fields = {}
+        for name in FIELD_NAMES:
+            polygon = np.array(self.fields[name], dtype=np.float64).reshape(-1, 2)
+            if 0 < len(polygon) < 3 or not np.isfinite(polygon).all():
+                raise ValueError(f"BagFrame.fields[{name!r}] must be a finite (N, 2) polygon "
+                                 f"with N >= 3 (or N = 0: none), got shape {polygon.shape}")
+            fields[name] = polygon
+        object.__setattr__(self, "fields", fields)
+
+    def _check_timing(self) -> None:
+        for name in ("scan_time", "time_increment"):
+            value = float(getattr(self, name))
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"BagFrame.{name} must be a finite time >= 0 s "
+                                 f"(0: unknown), got {value}")
+            object.__setattr__(self, name, value)
+        sweep = self.time_increment * max(len(self.scan) - 1, 0)
+        if self.scan_time > 0.0 and sweep > self.scan_time:
+            raise ValueError(
+                f"BagFrame.time_increment: {len(self.scan)} beams {self.time_increment} s "
+                f"apart take {sweep} s, longer than the scan time {self.scan_time} s"
+            )
 
 
 def write_ros2_bag(
@@ -565,15 +768,19 @@ class _Ros2Messages:
             x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0)
         )
 
-    def point(self, x: float, y: float) -> Any:
-        return self.types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=0.0)
+    def point(self, x: float, y: float, z: float = 0.0) -> Any:
+        return self.types["geometry_msgs/msg/Point"](x=float(x), y=float(y), z=float(z))
 
-    def pose(self, pose: np.ndarray) -> Any:
+    def pose(self, pose: np.ndarray, z: float = 0.0) -> Any:
         return self.types["geometry_msgs/msg/Pose"](
-            position=self.point(pose[0], pose[1]), orientation=self.quaternion(pose[2])
+            position=self.point(pose[0], pose[1], z), orientation=self.quaternion(pose[2])
         )
 
-    def laser_scan(self, scan: Scan, stamp_ns: int) -> Any:
+    def clock(self, stamp_ns: int) -> Any:
+        return self.types[CLOCK](clock=self.header(stamp_ns, "").stamp)
+
+    def laser_scan(self, frame: BagFrame, stamp_ns: int) -> Any:
+        scan = frame.scan
         ranges = np.asarray(scan.ranges, dtype=np.float32)
         intensities = (
             np.zeros(0, dtype=np.float32)
@@ -585,15 +792,16 @@ class _Ros2Messages:
             angle_min=scan.angle_min,
             angle_max=scan.angle_min + scan.angle_increment * max(len(scan) - 1, 0),
             angle_increment=scan.angle_increment,
-            time_increment=0.0,
-            scan_time=0.0,
+            time_increment=frame.time_increment,
+            scan_time=frame.scan_time,
             range_min=scan.range_min,
             range_max=scan.range_max,
             ranges=ranges,
             intensities=intensities,
         )
 
-    def odometry(self, pose: np.ndarray, covariance: np.ndarray | None, stamp_ns: int) -> Any:
+    def odometry(self, pose: np.ndarray, covariance: np.ndarray | None, stamp_ns: int,
+                 frame_id: str) -> Any:
         pose_covariance = np.zeros(36)
         if covariance is not None:
             rows = np.array(PLANAR_COVARIANCE_INDICES)
@@ -605,7 +813,7 @@ class _Ros2Messages:
             linear=vector(x=0.0, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=0.0)
         )
         return self.types[ODOMETRY](
-            header=self.header(stamp_ns, MAP_FRAME),
+            header=self.header(stamp_ns, frame_id),
             child_frame_id=BASE_FRAME,
             pose=self.types["geometry_msgs/msg/PoseWithCovariance"](
                 pose=self.pose(pose), covariance=pose_covariance
@@ -615,32 +823,59 @@ class _Ros2Messages:
             ),
         )
 
-    def transform(self, parent: str, child: str, pose: np.ndarray, stamp_ns: int) -> Any:
-        transform = self.types["geometry_msgs/msg/Transform"](
-            translation=self.types["geometry_msgs/msg/Vector3"](
-                x=float(pose[0]), y=float(pose[1]), z=0.0
-            ),
-            rotation=self.quaternion(pose[2]),
-        )
-        stamped = self.types["geometry_msgs/msg/TransformStamped"](
-            header=self.header(stamp_ns, parent),
-            child_frame_id=child,
-            transform=transform,
-        )
-        return self.types[TF_MESSAGE](transforms=[stamped])
+    def transforms(self, links: Sequence[tuple[str, str, np.ndarray]], stamp_ns: int) -> Any:
+        """Return a TFMessage of ``(parent, child, pose)`` links, all at ``stamp_ns``."""
+        stamped = [
+            self.types["geometry_msgs/msg/TransformStamped"](
+                header=self.header(stamp_ns, parent),
+                child_frame_id=child,
+                transform=self.types["geometry_msgs/msg/Transform"](
+                    translation=self.types["geometry_msgs/msg/Vector3"](
+                        x=float(pose[0]), y=float(pose[1]), z=0.0
+                    ),
+                    rotation=self.quaternion(pose[2]),
+                ),
+            )
+            for parent, child, pose in links
+        ]
+        return self.types[TF_MESSAGE](transforms=stamped)
 
-    def marker(self, stamp_ns: int, index: int, points: np.ndarray, action: int) -> Any:
+    def polygon(self, points: np.ndarray, stamp_ns: int) -> Any:
+        point32 = self.types["geometry_msgs/msg/Point32"]
+        return self.types[POLYGON_STAMPED](
+            header=self.header(stamp_ns, BASE_FRAME),
+            polygon=self.types["geometry_msgs/msg/Polygon"](
+                points=[point32(x=float(x), y=float(y), z=0.0) for x, y in points]
+            ),
+        )
+
+    def marker(
+        self,
+        stamp_ns: int,
+        *,
+        ns: str,
+        index: int,
+        kind: str,
+        action: str = "ADD",
+        pose: ArrayLike = (0.0, 0.0, 0.0),
+        z: float = 0.0,
+        scale: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        colour: Colour = (0.0, 0.0, 0.0),
+        alpha: float = 1.0,
+        points: Sequence[ArrayLike] = (),
+    ) -> Any:
         marker_type = self.types["visualization_msgs/msg/Marker"]
-        r, g, b, a = MARKER_COLOR
+        vector = self.types["geometry_msgs/msg/Vector3"]
+        r, g, b = colour
         return marker_type(
             header=self.header(stamp_ns, MAP_FRAME),
-            ns="polylines",
+            ns=ns,
             id=index,
-            type=marker_type.LINE_STRIP,
-            action=action,
-            pose=self.pose(np.zeros(3)),
-            scale=self.types["geometry_msgs/msg/Vector3"](x=MARKER_LINE_WIDTH, y=0.0, z=0.0),
-            color=self.types["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a),
+            type=getattr(marker_type, kind),
+            action=getattr(marker_type, action),
+            pose=self.pose(pose, z),
+            scale=vector(x=float(scale[0]), y=float(scale[1]), z=float(scale[2])),
+            color=self.types["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=alpha),
             lifetime=self.types["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
             frame_locked=False,
             points=[self.point(x, y) for x, y in points],
@@ -658,15 +893,47 @@ class _Ros2Messages:
             mesh_use_embedded_materials=False,
         )
 
-    def marker_array(self, polylines: Sequence[np.ndarray], stamp_ns: int) -> Any:
-        marker_type = self.types["visualization_msgs/msg/Marker"]
-        # DELETEALL first: every message then carries the whole current map.
-        markers = [self.marker(stamp_ns, 0, np.zeros((0, 2)), marker_type.DELETEALL)]
-        markers += [
-            self.marker(stamp_ns, index, points, marker_type.ADD)
-            for index, points in enumerate(polylines)
+    def marker_array(self, markers: list[Any], stamp_ns: int) -> Any:
+        # DELETEALL first: every message then carries the whole current picture.
+        clear = self.marker(stamp_ns, ns="", index=0, kind="ARROW", action="DELETEALL")
+        return self.types[MARKER_ARRAY](markers=[clear, *markers])
+
+    def polylines(self, frame: BagFrame, stamp_ns: int) -> Any:
+        status = frame.polyline_status or (None,) * len(frame.polylines)
+        markers = [
+            self.marker(
+                stamp_ns, ns=state or "polylines", index=index, kind="LINE_STRIP",
+                scale=(MARKER_LINE_WIDTH, 0.0, 0.0),
+                colour=POLYLINE_COLOUR if state is None else STATUS_COLOURS[state],
+                points=points,
+            )
+            for index, (points, state) in enumerate(zip(frame.polylines, status, strict=True))
         ]
-        return self.types[MARKER_ARRAY](markers=markers)
+        return self.marker_array(markers, stamp_ns)
+
+    def people(self, people: Sequence[BagPerson], stamp_ns: int) -> Any:
+        # A CYLINDER's pose is its centre and its scale the bounding box: lift it by half.
+        markers = [
+            self.marker(
+                stamp_ns, ns="people", index=index, kind="CYLINDER",
+                pose=np.array([*person.position, 0.0]), z=person.height / 2.0,
+                scale=(2.0 * person.radius, 2.0 * person.radius, person.height),
+                colour=PERSON_COLOUR, alpha=SOLID_ALPHA,
+            )
+            for index, person in enumerate(people)
+        ]
+        return self.marker_array(markers, stamp_ns)
+
+    def boxes(self, boxes: Sequence[BagBox], stamp_ns: int) -> Any:
+        markers = [
+            self.marker(
+                stamp_ns, ns="boxes", index=index, kind="CUBE", pose=box.pose,
+                z=box.size[2] / 2.0, scale=tuple(box.size), colour=BOX_COLOUR,
+                alpha=SOLID_ALPHA,
+            )
+            for index, box in enumerate(boxes)
+        ]
+        return self.marker_array(markers, stamp_ns)
 
 
 def _write_frames(
@@ -674,22 +941,32 @@ def _write_frames(
 ) -> None:
     build = _Ros2Messages()
     with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=storage) as writer:
-        topics = {
-            SCAN_TOPIC: LASER_SCAN,
-            ODOM_TOPIC: ODOMETRY,
-            EKF_TOPIC: ODOMETRY,
-            TF_TOPIC: TF_MESSAGE,
-            MARKER_TOPIC: MARKER_ARRAY,
-        }
-        connection = {
-            topic: writer.add_connection(topic, msgtype, typestore=build.store)
-            for topic, msgtype in topics.items()
-        }
+        connections: dict[str, Any] = {}
+
+        def connect(topic: str, msgtype: str, **qos: Any) -> None:
+            connections[topic] = writer.add_connection(topic, msgtype, typestore=build.store,
+                                                       **qos)
+
+        def write(topic: str, msgtype: str, message: Any, stamp_ns: int) -> None:
+            # The optional topics are created on first use: one no frame has data for is
+            # left out (a replayed log has no safety fields, no people and no boxes).
+            if topic not in connections:
+                connect(topic, msgtype)
+            writer.write(connections[topic], stamp_ns, build.serialize(message))
+
+        for topic, msgtype in (
+            (CLOCK_TOPIC, CLOCK),
+            (SCAN_TOPIC, LASER_SCAN),
+            (ODOM_TOPIC, ODOMETRY),
+            (EKF_TOPIC, ODOMETRY),
+            (TF_TOPIC, TF_MESSAGE),
+            (MARKER_TOPIC, MARKER_ARRAY),
+        ):
+            connect(topic, msgtype)
         # Late-joining subscribers (RViz started after `ros2 bag play`) need the static
         # transform latched, as robot_state_publisher offers it.
-        connection[TF_STATIC_TOPIC] = writer.add_connection(
-            TF_STATIC_TOPIC, TF_MESSAGE, typestore=build.store, offered_qos_profiles=[LATCHED]
-        )
+        connect(TF_STATIC_TOPIC, TF_MESSAGE, offered_qos_profiles=[LATCHED])
+
         for index, frame in enumerate(frames):
             if not isinstance(frame, BagFrame):
                 raise TypeError(
@@ -698,14 +975,27 @@ def _write_frames(
                 )
             stamp_ns = round(frame.scan.stamp * NANOSECONDS)
             if index == 0:
-                static = build.transform(BASE_FRAME, LASER_FRAME, laser_offset, stamp_ns)
-                writer.write(connection[TF_STATIC_TOPIC], stamp_ns, build.serialize(static))
-            messages = {
-                SCAN_TOPIC: build.laser_scan(frame.scan, stamp_ns),
-                ODOM_TOPIC: build.odometry(frame.odom_pose, None, stamp_ns),
-                EKF_TOPIC: build.odometry(frame.ekf_pose, frame.ekf_covariance, stamp_ns),
-                TF_TOPIC: build.transform(MAP_FRAME, BASE_FRAME, frame.ekf_pose, stamp_ns),
-                MARKER_TOPIC: build.marker_array(frame.polylines, stamp_ns),
-            }
-            for topic, message in messages.items():
-                writer.write(connection[topic], stamp_ns, build.serialize(message))
+                static = build.transforms([(BASE_FRAME, LASER_FRAME, laser_offset)], stamp_ns)
+                write(TF_STATIC_TOPIC, TF_MESSAGE, static, stamp_ns)
+            # map -> odom is what the EKF corrects of odometry: composed with odom ->
+            # base_link (the odometry pose) it gives the EKF pose, map -> base_link.
+            drift = compose(frame.ekf_pose, inverse(frame.odom_pose))
+            links = [(MAP_FRAME, ODOM_FRAME, drift), (ODOM_FRAME, BASE_FRAME, frame.odom_pose)]
+            write(CLOCK_TOPIC, CLOCK, build.clock(stamp_ns), stamp_ns)
+            write(SCAN_TOPIC, LASER_SCAN, build.laser_scan(frame, stamp_ns), stamp_ns)
+            write(ODOM_TOPIC, ODOMETRY,
+                  build.odometry(frame.odom_pose, None, stamp_ns, ODOM_FRAME), stamp_ns)
+            write(EKF_TOPIC, ODOMETRY,
+                  build.odometry(frame.ekf_pose, frame.ekf_covariance, stamp_ns, MAP_FRAME),
+                  stamp_ns)
+            write(TF_TOPIC, TF_MESSAGE, build.transforms(links, stamp_ns), stamp_ns)
+            write(MARKER_TOPIC, MARKER_ARRAY, build.polylines(frame, stamp_ns), stamp_ns)
+            if frame.fields is not None:
+                for name in FIELD_NAMES:
+                    write(FIELD_TOPICS[name], POLYGON_STAMPED,
+                          build.polygon(frame.fields[name], stamp_ns), stamp_ns)
+            if frame.people is not None:
+                write(PEOPLE_TOPIC, MARKER_ARRAY, build.people(frame.people, stamp_ns),
+                      stamp_ns)
+            if frame.boxes is not None:
+                write(BOX_TOPIC, MARKER_ARRAY, build.boxes(frame.boxes, stamp_ns), stamp_ns)

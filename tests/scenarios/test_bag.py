@@ -12,7 +12,6 @@ from scenarios.commands.run import BAG_STORAGE_CHOICES
 from scenarios.logs.bag import (
     BAG_STORAGES,
     BAG_TOPICS,
-    BagRecorder,
     bag_frame,
     check_new_bag_path,
     write_run_bag,
@@ -183,10 +182,8 @@ def test_semistatic_replay_runs_on_the_bag(capsys, recorded, tmp_path):
 
 def test_mcap_bag_reads_back_the_same_scans(recorded, tmp_path):
     records, log = recorded["records"], recorded["log"]
-    recorder = BagRecorder()
-    for record in records[:20]:
-        recorder(record)
-    bag = write_run_bag(tmp_path / "run", recorder.frames, log.robot, storage="mcap")
+    frames = [bag_frame(record) for record in records[:20]]
+    bag = write_run_bag(tmp_path / "run", frames, log.robot, storage="mcap")
     assert [p.suffix for p in bag.iterdir() if p.suffix != ".yaml"] == [".mcap"]
     scans = list(read_bag(bag))
     assert len(scans) == 20

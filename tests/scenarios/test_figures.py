@@ -1,5 +1,6 @@
 """The figures of a closed-loop run: real PNGs, clear errors, atomic writes, no pyplot leaks."""
 
+import dataclasses
 import math
 
 import matplotlib
@@ -13,21 +14,34 @@ from matplotlib.figure import Figure
 from matplotlib.image import imread
 
 from robots.path import SplinePath
+from robots.presets import get_preset
+from scenarios.bench.records import LapLog, RunLog
+from scenarios.bench.safety_record import SafetyRecord
+from scenarios.results import outputs
 from scenarios.results.figures import ekf as ekf_figure
+from scenarios.results.figures import events as events_figure
 from scenarios.results.figures import laps as lap_figures
 from scenarios.results.figures import (
     plot_detection_scores,
     plot_ekf_corrections,
     plot_lap_times,
     plot_polygonal_map,
+    plot_run_events,
     plot_tangent_histograms,
 )
+from scenarios.results.figures import polygonal_map as map_figure
+from scenarios.results.figures import sharing as sharing_figure
+from scenarios.results.figures import tangents as tangents_figure
+from scenarios.spec.layout import scenario_world
+from scenarios.spec.load import load_scenario
+from semistatic.colours import STATUS_COLOURS
 from worlds.load import load_world
 
 MIN_PNG_BYTES = 5_000
 MIN_DISTINCT_COLOURS = 5
 MIN_INK_FRACTION = 0.01  # of pixels that are not white
 TAB_RED = np.array([0.839, 0.153, 0.157])
+NEW_BLUE = np.array(STATUS_COLOURS["new"])
 COLOUR_TOLERANCE = 0.03
 
 
@@ -87,11 +101,20 @@ def render(name, path, world):
         return plot_ekf_corrections(*ekf_inputs(), path, title="sim1")
     if name == "laps":
         return plot_lap_times(LAPS, path, stops={"adaptive": [0, 2, 0]})
+    if name == "events":
+        return plot_run_events(EVENT_LAPS, path, speeds=EVENT_SPEEDS, events=EVENTS)
     assert name == "scores"
     return plot_detection_scores(SCORES, path)
 
 
-FIGURES = ("tangent", "map", "ekf", "laps", "scores")
+EVENT_LAPS = [{"lap": 1, "duration_s": 20.0, "stops": 1, "slowdowns": 2},
+              {"lap": 2, "duration_s": 18.0, "latencies": {"crate": 4}}]
+EVENT_SPEEDS = {1: (np.linspace(0.0, 20.0, 50), np.full(50, 0.4))}
+EVENTS = [{"lap": 1, "t": 7.5, "kind": "stop"},
+          {"lap": 2, "t": 3.0, "kind": "new_object", "label": "aisle#4"},
+          {"lap": 2, "t": 9.0, "kind": "infraction", "label": "near miss"}]
+
+FIGURES = ("tangent", "map", "ekf", "laps", "scores", "events")
 
 
 @pytest.mark.parametrize("name", FIGURES)
@@ -294,19 +317,23 @@ def test_ekf_heading_corrections_are_wrapped(tmp_path):
     np.testing.assert_allclose(imread(plain), imread(wrapped), atol=1e-6)
 
 
-def red_pixels(path):
+def pixels_of(path, colour):
     image = imread(path)[..., :3]
-    return int(np.all(np.abs(image - TAB_RED) < COLOUR_TOLERANCE, axis=-1).sum())
+    return int(np.all(np.abs(image - colour) < COLOUR_TOLERANCE, axis=-1).sum())
 
 
-def test_map_draws_new_polylines_in_red_and_confirmed_ones_not(world, tmp_path):
+def red_pixels(path):
+    return pixels_of(path, TAB_RED)
+
+
+def test_map_draws_new_polylines_in_the_palette_colour_and_confirmed_ones_not(world, tmp_path):
     confirmed = map_inputs(world, "confirmed")
     new = map_inputs(world, "new")
     as_confirmed = plot_polygonal_map(world, confirmed["map_polylines"], tmp_path / "c.png")
     as_new = plot_polygonal_map(world, new["map_polylines"], tmp_path / "n.png")
-    # The legend always shows a short red sample; the walls' worth of new polylines is
-    # much more red than that.
-    assert red_pixels(as_new) > 20 * red_pixels(as_confirmed)
+    # The legend always shows a short sample of the "new" colour; the walls' worth of new
+    # polylines is much more of it than that.
+    assert pixels_of(as_new, NEW_BLUE) > 20 * pixels_of(as_confirmed, NEW_BLUE)
 
 
 def test_map_without_optional_layers_is_still_drawn(world, tmp_path):
@@ -379,3 +406,161 @@ def test_ekf_figure_with_jumps_and_reinitialisations(tmp_path):
     unflagged = plot_ekf_corrections(stamps, corrections, sigmas, tmp_path / "jumps.png")
     # An unexplained jump is drawn: both the markers and the legend sample are tab:red.
     assert red_pixels(unflagged) > 50
+
+
+# --- The figures of a run, from a RunLog whose every number is set here ---------------
+
+RUN_START = (0.0, 40.0)  # each lap's start (s of the run)
+RUN_TICKS = 60
+RUN_DT = 0.25
+RUN_SPEED = 0.4  # m/s, straight along x: the speed line must read it
+
+
+def run_log():
+    """A two-lap pal3b RunLog (adaptive, seed 4) with stops, an infraction and map objects."""
+    spec = dataclasses.replace(load_scenario("pal3b"), policy="adaptive", seed=4, laps=2,
+                               moves=())
+    world = scenario_world(spec)
+    log = RunLog(spec=spec, world=world, robot=get_preset(spec.robot), segments=())
+    for lap, start in enumerate(RUN_START, start=1):
+        log.laps.append(LapLog(lap=lap, start_time=start, first_tick=len(log.stamps),
+                               duration_s=RUN_TICKS * RUN_DT, completed=True, stops=lap - 1,
+                               detection={"tp": 3, "fp": 0, "fn": 0, "precision": 1.0,
+                                          "recall": 1.0, "f1": 1.0}))
+        for tick in range(RUN_TICKS):
+            pose = np.array([1.0 + RUN_SPEED * tick * RUN_DT, 0.5, 0.0])
+            log.stamps.append(start + tick * RUN_DT)
+            log.true_poses.append(pose)
+            log.estimated_poses.append(pose + 1e-4)
+    features = [  # first seen in lap 1 (two), in lap 2 (one)
+        {"geometry": {"coordinates": [[0.0, 1.0], [2.0, 1.0]]},
+         "properties": {"segment": "hall", "status": "confirmed", "id": ident,
+                        "first_seen": seen}}
+        for ident, seen in ((0, 1.0), (1, 5.0), (7, 43.5))
+    ]
+    log.maps_after_lap = [{"hall": {"features": features[:2]}}, {"hall": {"features": features}}]
+    log.truth_after_lap = [{box.name: box.corners() for box in world.boxes}] * 2
+    count = 20
+    log.ekf_history = {"stamp": np.linspace(0.0, 10.0, count),
+                       "correction": np.full((count, 3), 1e-4),
+                       "sigma": np.full((count, 3), 1e-3),
+                       "reinitialized": np.zeros(count, dtype=bool)}
+    log.example_pair = (CORNER, CORNER + 0.01)
+    record = SafetyRecord()
+    record.protective_stops = [{"t": 45.0, "lap": 2, "speed": 0.4, "object": "person walker"},
+                               {"t": 48.25, "lap": 2, "speed": 0.3, "object": "wall 1"}]
+    record.infraction("near_miss", t=3.5, vehicle="robot", lap=1, where=(2.5, 0.5),
+                      detail="person walker 0.1 m from the vehicle")
+    log.safety_record = record
+    return log
+
+
+@pytest.fixture
+def drawn(tmp_path, monkeypatch):
+    """Write a run's figures and return them as {file name: matplotlib Figure}."""
+    figures = {}
+    for module in (map_figure, ekf_figure, sharing_figure, tangents_figure, lap_figures,
+                   events_figure):
+        real = module.write_png
+
+        def spy(fig, path, real=real):
+            figures[path.name] = fig
+            return real(fig, path)
+
+        monkeypatch.setattr(module, "write_png", spy)
+    log = run_log()
+    outputs.write_figures(log, tmp_path / "figures")
+    assert sorted(figures) == sorted(p.name for p in (tmp_path / "figures").iterdir())
+    return log, figures
+
+
+def titles(fig):
+    return "\n".join([fig._suptitle.get_text() if fig._suptitle else ""]
+                     + [ax.get_title() for ax in fig.axes])
+
+
+def test_every_run_figure_names_the_scenario_policy_seed_and_laps(drawn):
+    _, figures = drawn
+    assert {"polygonal_map.png", "ekf_corrections.png", "tangent_histograms.png",
+            "detection_scores.png", "events.png"} <= set(figures)
+    for name, fig in figures.items():
+        text = titles(fig)
+        for fact in ("pal3b", "policy adaptive", "seed 4", "2 laps"):
+            assert fact in text, f"{name}: {fact!r} not in its title {text!r}"
+
+
+def test_people_are_drawn_on_the_map_along_their_waypoints(drawn):
+    _, figures = drawn
+    ax = figures["polygonal_map.png"].axes[0]
+    people = load_world("pal3").enable_people("walker").active_people
+    assert people  # pal3b's walker: the figure must show it
+    for person in people:
+        (route,) = [line for line in ax.lines if line.get_gid() == f"person:{person.name}"]
+        np.testing.assert_allclose(route.get_xydata(), np.asarray(person.waypoints))
+        assert any(text.get_text().startswith(person.name) for text in ax.texts)
+    legend = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert any(label.startswith("person") for label in legend)
+
+
+def test_a_map_without_people_draws_no_person(world, tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(map_figure, "write_png", lambda fig, path: drawn.append(fig) or path)
+    plot_polygonal_map(world, [], tmp_path / "map.png")
+    ax = drawn[0].axes[0]
+    assert not world.active_people
+    assert not [line for line in ax.lines if (line.get_gid() or "").startswith("person:")]
+    assert not any("person" in t.get_text() for t in ax.get_legend().get_texts())
+
+
+def markers(fig, kind):
+    """Return {lap row index: x data} of the event markers of ``kind``."""
+    found = {}
+    for row, ax in enumerate(fig.axes):
+        for line in ax.lines:
+            if line.get_gid() == f"event:{kind}":
+                found[row] = np.asarray(line.get_xdata(), dtype=float).tolist()
+    return found
+
+
+def test_events_figure_marks_the_recorded_stops_infractions_and_new_objects(drawn):
+    log, figures = drawn
+    fig = figures["events.png"]
+    # Stops and infractions: the safety record's, at their time since their lap's start.
+    assert markers(fig, "stop") == {1: [45.0 - 40.0, 48.25 - 40.0]}
+    assert sum(map(len, markers(fig, "stop").values())) == len(log.safety_record.protective_stops)
+    assert markers(fig, "infraction") == {0: [3.5]}
+    # New objects: the map polylines first seen during each lap (two in lap 1, one in lap 2).
+    assert markers(fig, "new_object") == {0: [1.0, 5.0], 1: [3.5]}
+
+
+def test_events_figure_draws_the_true_speed_and_sums_up_each_lap(drawn):
+    log, figures = drawn
+    fig = figures["events.png"]
+    for ax, lap in zip(fig.axes, log.laps, strict=True):
+        (speed,) = [line for line in ax.lines if line.get_gid() == "speed"]
+        np.testing.assert_allclose(speed.get_ydata(), RUN_SPEED)
+        row = ax.get_title(loc="left")
+        assert row.startswith(f"lap {lap.lap}: {lap.duration_s:.1f} s")
+        assert f"{lap.stops} stop" in row
+
+
+def test_detection_bars_carry_the_scores_and_the_counts(drawn):
+    log, figures = drawn
+    ax = figures["detection_scores.png"].axes[0]
+    for name in ("precision", "recall", "f1"):
+        heights = [bar.get_height() for bar in ax.patches if bar.get_gid() == f"score:{name}"]
+        assert heights == [lap.detection[name] for lap in log.laps]
+    labels = [tick.get_text() for tick in ax.get_xticklabels()]
+    assert labels == [f"lap {lap.lap}\ntp 3 · fp 0 · fn 0 · from people 0" for lap in log.laps]
+    # Every score is written on its bar: all-1.0 scores read as such.
+    values = [text.get_text() for text in ax.texts]
+    assert values.count("1.00") == 3 * len(log.laps)
+
+
+def test_events_reject_an_event_of_an_unknown_kind_or_lap(tmp_path):
+    with pytest.raises(ValueError, match=r"events\[0\]\.kind: must be one of"):
+        plot_run_events(EVENT_LAPS, tmp_path / "e.png", events=[{"lap": 1, "t": 1.0,
+                                                                  "kind": "slowdown"}])
+    with pytest.raises(ValueError, match="laps: lap 1 appears twice"):
+        plot_run_events([EVENT_LAPS[0]] * 2, tmp_path / "e.png")
+    assert list(tmp_path.iterdir()) == []

@@ -112,11 +112,11 @@ def test_ros2_bag_carries_markers_covariance_and_tf(tmp_path):
             elif connection.topic == EKF_TOPIC:
                 covariances.append(message.pose.covariance.reshape(6, 6))
             elif connection.topic == "/tf":
-                (transform,) = message.transforms
-                assert (transform.header.frame_id, transform.child_frame_id) == (
-                    "map",
-                    "base_link",
-                )
+                # REP-105: the EKF's correction map -> odom, then odometry odom -> base_link.
+                assert [(t.header.frame_id, t.child_frame_id) for t in message.transforms] == [
+                    ("map", "odom"),
+                    ("odom", "base_link"),
+                ]
     assert len(markers) == 3
     for message, frame in zip(markers, frames, strict=True):
         assert message[0].action == 3  # DELETEALL, then one LINE_STRIP per polyline

@@ -1,4 +1,4 @@
-"""Figures of a closed-loop run: paper Fig. 2, 4 and 5 and the speed-policy comparison.
+"""Figures of a closed-loop run: paper Fig. 2, 4 and 5, events per lap, policy comparison.
 
 Every function takes plain data (numpy arrays, dicts, a :class:`~worlds.spec.WorldSpec`),
 validates it (a ``ValueError`` that names the argument and says what is wrong), draws on
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from scenarios.results.figures.campaign import plot_metric_distributions, plot_table1_intervals
 from scenarios.results.figures.ekf import plot_ekf_corrections
+from scenarios.results.figures.events import plot_run_events
 from scenarios.results.figures.laps import plot_detection_scores, plot_lap_times
 from scenarios.results.figures.polygonal_map import plot_polygonal_map
 from scenarios.results.figures.replay_map import plot_replay_map
@@ -36,6 +37,7 @@ __all__ = [
     "plot_metric_distributions",
     "plot_polygonal_map",
     "plot_replay_map",
+    "plot_run_events",
     "plot_sharing_traffic",
     "plot_table1_intervals",
     "plot_tangent_histograms",

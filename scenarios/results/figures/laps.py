@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
 from scenarios.results.figures.style import figure_title, png_path, write_png
 
@@ -212,16 +211,36 @@ def _score_table(per_lap: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, np.n
     return laps_array[order], np.array(scores)[order]
 
 
+SCORE_COLOURS = {"precision": "tab:blue", "recall": "tab:orange", "f1": "tab:green"}
+
+COUNT_NAMES = ("tp", "fp", "fn", "false_objects_from_people")
+"""Optional per-lap counts written under each lap's bars when a row has them."""
+
+COUNT_LABELS = {"tp": "tp", "fp": "fp", "fn": "fn", "false_objects_from_people": "from people"}
+
+
+def _lap_counts(row: Mapping[str, Any]) -> str:
+    """Return a lap's detection counts as a tick label line (empty when the row has none)."""
+    return " · ".join(f"{COUNT_LABELS[name]} {int(row[name])}" for name in COUNT_NAMES
+                      if name in row)
+
+
 def plot_detection_scores(
     per_lap: Sequence[Mapping[str, Any]], path: str | os.PathLike[str], *, title: str = ""
 ) -> Path:
-    """Draw semi-static object detection precision, recall and F1 per lap.
+    """Draw semi-static object detection precision, recall and F1 per lap as labelled bars.
+
+    Each lap is a group of three bars, each labelled with its value, so that scores that
+    are all 1.0 read as such instead of three lines drawn on top of each other. When the
+    rows carry the counts behind the scores (``tp``, ``fp``, ``fn``) and the false objects
+    made from people (``false_objects_from_people``), they are written under the lap.
 
     Parameters
     ----------
     per_lap
         Dicts ``{"lap": int, "precision": float, "recall": float, "f1": float}``, scores in
-        ``[0, 1]`` (``nan`` where undefined: drawn as a gap), in any lap order.
+        ``[0, 1]`` (``nan`` where undefined: no bar, "no score" when all three are), in
+        any lap order; optionally with the integer counts :data:`COUNT_NAMES`.
     path
         Where to write the PNG (``*.png``).
     title
@@ -240,7 +259,7 @@ def plot_detection_scores(
     Examples
     --------
     >>> import tempfile
-    >>> rows = [{"lap": 2, "precision": 0.9, "recall": 0.8, "f1": 0.85},
+    >>> rows = [{"lap": 2, "precision": 0.9, "recall": 0.8, "f1": 0.85, "tp": 9, "fp": 1},
     ...         {"lap": 3, "precision": 1.0, "recall": 0.9, "f1": 0.95}]
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     plot_detection_scores(rows, Path(tmp) / "scores.png").name
@@ -252,32 +271,41 @@ def plot_detection_scores(
     """
     path = png_path(path)
     laps, scores = _score_table(per_lap)
+    rows = {int(row["lap"]): row for row in per_lap}
 
-    figure_width = float(np.clip(0.5 * laps.size + 3.0, *FIGURE_WIDTH_RANGE))
+    figure_width = float(np.clip(1.3 * laps.size + 3.0, *FIGURE_WIDTH_RANGE))
     fig = Figure(figsize=(figure_width, 4.5), layout="constrained")
     ax = fig.subplots()
-    styles = {
-        "precision": {"marker": "o", "color": "tab:blue", "lw": 1.5},
-        "recall": {"marker": "s", "color": "tab:orange", "lw": 1.5},
-        "f1": {"marker": "D", "color": "tab:green", "lw": 2.5},
-    }
+    centres = np.arange(laps.size)
+    width = 0.8 / len(SCORE_NAMES)
     means = {}
     for column, name in enumerate(SCORE_NAMES):
         values = scores[:, column]
         defined = values[~np.isnan(values)]
         means[name] = float(defined.mean()) if defined.size else math.nan
         label = "F1" if name == "f1" else name
-        ax.plot(laps, values, ms=6, label=f"{label} (mean {means[name]:.2f})", **styles[name])
-    for lap in laps[np.all(np.isnan(scores), axis=1)]:
+        offsets = centres + (column - 0.5 * (len(SCORE_NAMES) - 1)) * width
+        bars = ax.bar(offsets, np.nan_to_num(values), width, color=SCORE_COLOURS[name],
+                      edgecolor="black", lw=0.5, label=f"{label} (mean {means[name]:.2f})",
+                      gid=f"score:{name}")
+        if laps.size <= MAX_LABELLED_LAPS:
+            ax.bar_label(bars, ["" if math.isnan(v) else f"{v:.2f}" for v in values],
+                         fontsize=7, padding=2)
+    for index in np.flatnonzero(np.all(np.isnan(scores), axis=1)):
         # Say so where a lap has no score at all, rather than leave a silent gap.
-        ax.text(lap, 0.5, "no score", rotation=90, ha="center", va="center", color="0.5")
-    ax.set_ylim(0.0, 1.05)
-    ax.set_xlim(laps[0] - 0.5, laps[-1] + 0.5)
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set_xlabel("lap")
+        ax.text(centres[index], 0.5, "no score", rotation=90, ha="center", va="center",
+                color="0.5")
+    labels = [f"lap {lap}" for lap in laps]
+    if laps.size <= MAX_LABELLED_LAPS:
+        labels = [f"{label}\n{_lap_counts(rows[lap])}".rstrip() for label, lap in
+                  zip(labels, laps, strict=True)]
+    ax.set_xticks(centres, labels, fontsize=8)
+    # Headroom above 1.0 for the value labels and the legend.
+    ax.set_ylim(0.0, 1.3)
+    ax.set_yticks(np.linspace(0.0, 1.0, 6))
     ax.set_ylabel("score")
-    ax.grid(True, lw=0.3, alpha=0.5)
-    ax.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    ax.legend(loc="upper center", ncols=len(SCORE_NAMES), fontsize=8, framealpha=0.9)
     details = ", ".join(
         f"{'F1' if name == 'f1' else name} {means[name]:.2f}" for name in SCORE_NAMES
     )

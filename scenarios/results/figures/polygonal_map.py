@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
+from matplotlib.patches import Circle, Patch
 from numpy.typing import ArrayLike
 
 from scenarios.results.figures.style import (
@@ -26,31 +26,50 @@ from scenarios.results.figures.style import (
     png_path,
     write_png,
 )
+from semistatic.colours import (
+    BOX_COLOUR,
+    EKF_COLOUR,
+    PERSON_COLOUR,
+    POST_COLOUR,
+    STATUS_COLOURS,
+    TRUE_COLOUR,
+)
 from worlds.checks import build_spline
 from worlds.plot import draw_box, draw_posts, draw_walls, figure_size
-from worlds.spec import WorldSpec
+from worlds.spec import PersonSpec, WorldSpec
 
-__all__ = ["plot_polygonal_map"]
+__all__ = ["PERSON_GID", "draw_people", "plot_polygonal_map"]
 
 MAP_STATUSES = ("confirmed", "new", "blank")
 """Life-cycle states of a map polyline, in the order the legend lists them."""
 
 STATUS_STYLE: dict[str, dict[str, Any]] = {
-    # Confirmed polylines are the bulk of a map; new ones (semi-static objects just seen)
-    # and blank ones (missed while they should have been visible) are what a reader looks
-    # for, so they get the loud colours and blank ones a dashed, hollow look.
-    "confirmed": {"color": "tab:blue", "lw": 1.8, "ls": "-", "mfc": "tab:blue", "zorder": 8},
-    "new": {"color": "tab:red", "lw": 2.2, "ls": "-", "mfc": "tab:red", "zorder": 9},
-    "blank": {"color": "tab:gray", "lw": 1.6, "ls": "--", "mfc": "white", "zorder": 7},
+    # The colours are the GUI's and the recordings' (semistatic.colours), so a status
+    # reads the same in every view. New polylines (semi-static objects just seen) are
+    # drawn thickest and on top, blank ones (missed while they should have been visible)
+    # dashed and hollow: they are what a reader looks for among the confirmed bulk.
+    "confirmed": {"color": STATUS_COLOURS["confirmed"], "lw": 1.8, "ls": "-",
+                  "mfc": STATUS_COLOURS["confirmed"], "zorder": 8},
+    "new": {"color": STATUS_COLOURS["new"], "lw": 2.2, "ls": "-", "mfc": STATUS_COLOURS["new"],
+            "zorder": 9},
+    "blank": {"color": STATUS_COLOURS["blank"], "lw": 1.6, "ls": "--", "mfc": "white",
+              "zorder": 7},
 }
 
 MAP_COLORS = {
+    # Walls stay light grey, not the palette's dark WALL_COLOUR: most map polylines lie
+    # on walls and must stay visible over them.
     "wall": "0.82",
     "path": "0.45",
-    "post": "0.25",
-    "trajectory": "black",
-    "estimate": "tab:orange",
+    "post": POST_COLOUR,
+    "trajectory": TRUE_COLOUR,
+    "estimate": EKF_COLOUR,
+    "person": PERSON_COLOUR,
 }
+
+PERSON_GID = "person:{name}"
+"""``gid`` of the line that draws a person's route (``name`` is the person's): tests and
+tools find it by that."""
 
 PATH_SAMPLE_SPACING = 0.02
 """Spacing (m) of the points that draw the planned spline path."""
@@ -111,6 +130,49 @@ def _draw_path(ax: Axes, world: WorldSpec) -> None:
         )
 
 
+def draw_people(ax: Axes, people: Sequence[PersonSpec]) -> list[Any]:
+    """Draw where each person walks and stands; return the legend handles (none without people).
+
+    A person's route is its waypoints joined in order (back to the first when it loops),
+    an arrow on its last leg, a disc of its body radius where it waits or appears
+    (``waypoints[0]``) and its name there; a person limited to some laps says which.
+    The route's line carries ``gid`` :data:`PERSON_GID`.
+
+    Examples
+    --------
+    >>> from matplotlib.figure import Figure
+    >>> ann = PersonSpec("ann", ((0.0, 0.0), (2.0, 0.0), (2.0, 1.0)), laps=(3,))
+    >>> ax = Figure().subplots()
+    >>> [handle.get_label() for handle in draw_people(ax, [ann])]
+    ['person: route, body where it waits']
+    >>> route = next(line for line in ax.lines if line.get_gid() == "person:ann")
+    >>> route.get_xydata().tolist()
+    [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0]]
+    >>> [text.get_text() for text in ax.texts if text.get_text()]
+    ['ann (lap 3)']
+    """
+    colour = MAP_COLORS["person"]
+    for person in people:
+        waypoints = np.asarray(person.waypoints, dtype=float)
+        route = np.vstack([waypoints, waypoints[:1]]) if person.loop else waypoints
+        ax.plot(*route.T, color=colour, lw=1.2, ls="-", marker=".", ms=4, zorder=6,
+                gid=PERSON_GID.format(name=person.name))
+        if len(route) > 1:
+            ax.annotate("", route[-1], route[-2], zorder=6,
+                        arrowprops={"arrowstyle": "->", "color": colour, "lw": 1.2})
+        ax.add_patch(Circle(waypoints[0], person.radius, facecolor=(*colour, 0.35),
+                            edgecolor=colour, zorder=6))
+        word = "lap" if len(person.laps) == 1 else "laps"
+        laps = f" ({word} {', '.join(map(str, person.laps))})" if person.laps else ""
+        ax.annotate(f"{person.name}{laps}", waypoints[0], textcoords="offset points",
+                    xytext=(5, 5), fontsize=7, color=colour, zorder=6,
+                    bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 0.5})
+    if not people:
+        return []
+    return [Line2D([], [], color=colour, marker="o", ms=6, mfc=(*colour, 0.35),
+                   label="person: route, body where it waits")]
+
+
 def plot_polygonal_map(
     world: WorldSpec,
     map_polylines: Sequence[Mapping[str, Any]],
@@ -124,16 +186,18 @@ def plot_polygonal_map(
 ) -> Path:
     """Draw the polygonal map over the world and the ground truth, as in Fig. 4 (b)/(d).
 
-    Walls are light grey, reflective posts blue discs, the true box outlines dashed
-    brown with their names, the planned path dotted with its segments, the true
-    trajectory black and the EKF estimate dashed orange. The map polylines go on top,
-    coloured by life-cycle status (confirmed blue, new red, blank dashed grey), with
-    their vertices marked.
+    Walls are light grey, reflective posts teal discs, the true box outlines dashed
+    brown with their names, the people the world spawns (``world.active_people``) with
+    their routes and where they wait (:func:`draw_people`), the planned path dotted with
+    its segments, the true trajectory black and the EKF estimate dashed blue. The map
+    polylines go on top, coloured by life-cycle status in the palette of
+    :mod:`semistatic.colours` (confirmed green, new blue, blank dashed grey), with their
+    vertices marked.
 
     Parameters
     ----------
     world
-        The environment (walls, posts, path).
+        The environment (walls, posts, path, people).
     map_polylines
         Dicts ``{"points": (N, 2) world frame, "status": "new" | "confirmed" | "blank",
         "segment": str, "id": int}``; only ``points`` and ``status`` are drawn, other keys
@@ -196,8 +260,9 @@ got 'old'
     draw_walls(ax, world.walls, color=MAP_COLORS["wall"])
     draw_posts(ax, world.posts, color=MAP_COLORS["post"])
     for name, corners in outlines.items():
-        draw_box(ax, corners, name, outline=True)
+        draw_box(ax, corners, name, outline=True, color=BOX_COLOUR)
     _draw_path(ax, world)
+    people_handles = draw_people(ax, world.active_people)
     handles: list[Any] = [
         Patch(color=MAP_COLORS["wall"], label="wall"),
         Line2D([], [], ls="", marker="o", color=MAP_COLORS["post"], label="reflective post"),
@@ -206,12 +271,13 @@ got 'old'
     if outlines:
         handles.append(
             Patch(
-                facecolor=(0.55, 0.34, 0.29, 0.15),
-                edgecolor="tab:brown",
+                facecolor=(*BOX_COLOUR, 0.15),
+                edgecolor=BOX_COLOUR,
                 ls="--",
                 label="true box outline",
             )
         )
+    handles += people_handles
     track_styles = {
         "trajectory": {"color": MAP_COLORS["trajectory"], "ls": "-", "label": "true trajectory"},
         "estimate": {"color": MAP_COLORS["estimate"], "ls": "--", "label": "EKF estimate"},

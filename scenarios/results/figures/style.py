@@ -26,6 +26,7 @@ __all__ = [
     "count_text",
     "figure_title",
     "png_path",
+    "run_title",
     "write_png",
 ]
 
@@ -95,6 +96,22 @@ def count_text(count: int, noun: str, plural: str = "") -> str:
     ('1 edge', '3 edges', '2 vertices')
     """
     return f"{count} {noun if count == 1 else plural or noun + 's'}"
+
+
+def run_title(scenario: str, policy: str, seed: int, laps: int) -> str:
+    """Return the line that names a run in every figure title: scenario, policy, seed, laps.
+
+    A reader who finds the PNG alone (in a report, a chat, a folder of several runs)
+    still knows which run drew it.
+
+    Examples
+    --------
+    >>> run_title("sim1", "adaptive", 0, 2)
+    'sim1 · policy adaptive · seed 0 · 2 laps'
+    >>> run_title("pal1", "conservative, adaptive", 3, 1)
+    'pal1 · policy conservative, adaptive · seed 3 · 1 lap'
+    """
+    return f"{scenario} · policy {policy} · seed {seed} · {count_text(laps, 'lap')}"
 
 
 def figure_title(title: str, kind: str, details: str) -> str:
