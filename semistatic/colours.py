@@ -25,6 +25,7 @@ __all__ = [
     "POST_COLOUR",
     "RETURNS_COLOUR",
     "STATUS_COLOURS",
+    "TEXT_COLOUR",
     "TRUE_COLOUR",
     "WALL_COLOUR",
     "Colour",
@@ -60,6 +61,9 @@ PERSON_COLOUR: Colour = (1.0, 0.1, 0.6)
 TRUE_COLOUR: Colour = (0.1, 0.1, 0.1)
 EKF_COLOUR: Colour = (0.0, 0.55, 0.9)
 """The static world, true boxes and people, and the true and EKF trajectories."""
+
+TEXT_COLOUR: Colour = (0.05, 0.05, 0.2)
+"""Labels and status text (the GUI's legend and status line)."""
 
 
 def rgba8(colour: Colour, alpha: float = 1.0) -> tuple[int, int, int, int]:

@@ -5,6 +5,15 @@ in this project goes through ``sim.bullet`` (never the module-global ``pybullet`
 with its implicit client 0), so several simulations can live side by side in one
 process - the determinism tests run two of them.
 
+With ``gui=True`` the physics still runs in a headless ``DIRECT`` server and a second,
+GUI server (``sim.display``) only shows it (:class:`sim.debug_view.DebugView` copies the
+bodies there a few times per simulated second). PyBullet's own GUI server answers every
+command through a hand-over between the caller, its physics thread and its render thread:
+under a software-rendered virtual display each hand-over waited for a frame (10-45 ms
+measured, against ~0.02 ms in ``DIRECT``), and the closed loop makes ~650 calls per
+simulated second: a sim1 lap took > 300 s instead of ~11 s. Keeping the physics
+``DIRECT`` also keeps a watched run's results identical to a headless one.
+
 Time is fixed-step: ``step(n)`` advances the simulation by ``n * time_step`` seconds and
 ``sim_time`` counts them. The wall time spent inside PyBullet is accumulated in
 ``engine_time_s``: stepping always, and other calls when made inside
@@ -79,6 +88,26 @@ GRAVITY = 9.81
 _SOLVER_ITERATIONS = 50
 
 
+def _open_display() -> BulletClient:
+    """Open PyBullet's GUI window, set up to cost the least per frame.
+
+    The side panels and their camera previews (each a render of its own), and shadows
+    (a second pass over the scene) are off: each adds work to every frame, done by the
+    CPU under software rendering (Mesa llvmpipe in a virtual display), and a frame is
+    what the GUI makes a command wait for.
+    """
+    with quiet_stdout():
+        display = BulletClient(connection_mode=pybullet.GUI)
+    # Rendering itself is off too, until DebugView.show() renders a frame: the render
+    # thread would redraw the unchanged scene without pause, taking a core.
+    for flag in (pybullet.COV_ENABLE_RENDERING, pybullet.COV_ENABLE_GUI,
+                 pybullet.COV_ENABLE_SHADOWS,
+                 pybullet.COV_ENABLE_RGB_BUFFER_PREVIEW, pybullet.COV_ENABLE_DEPTH_BUFFER_PREVIEW,
+                 pybullet.COV_ENABLE_SEGMENTATION_MARK_PREVIEW):
+        display.configureDebugVisualizer(flag, 0)
+    return display
+
+
 @dataclass(frozen=True)
 class PhysicsState:
     """A physics state kept in the server's memory (:meth:`SimClient.save_state`).
@@ -98,7 +127,8 @@ class SimClient:
     Parameters
     ----------
     gui
-        Open the PyBullet GUI window instead of the headless ``DIRECT`` server.
+        Also open PyBullet's GUI window as ``display``, a second server that only shows
+        the scene; the physics always runs in the headless ``DIRECT`` server.
     time_step
         Fixed physics step in seconds (default 1/240 s).
     gravity
@@ -112,6 +142,8 @@ class SimClient:
         The fixed step, seconds.
     engine_time_s
         Wall time spent inside PyBullet (stepping and timed calls), seconds.
+    display
+        The GUI server's ``BulletClient`` when ``gui=True``, else ``None``.
 
     Examples
     --------
@@ -145,8 +177,11 @@ class SimClient:
         self.engine_time_s = 0.0
         self._steps = 0
         self._closed = False
+        # The display first: PyBullet answers getDebugVisualizerCamera (all zeros
+        # otherwise) only for a GUI that is the process's client 0.
+        self.display: BulletClient | None = _open_display() if self.gui else None
         with quiet_stdout():
-            self.bullet = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+            self.bullet = BulletClient(connection_mode=pybullet.DIRECT)
         self.bullet.setGravity(0.0, 0.0, -float(gravity))
         # Fixed stepping with no sub-steps, and overlapping pairs processed in a fixed
         # order: with the same calls in the same order two servers give identical states.
@@ -160,8 +195,6 @@ class SimClient:
         # BulletClient builds a new partial on every attribute access (~1 us): bind the
         # per-step call once.
         self._step_simulation = self.bullet.stepSimulation
-        if self.gui:
-            self.bullet.configureDebugVisualizer(self.bullet.COV_ENABLE_GUI, 0)
 
     @property
     def client_id(self) -> int:
@@ -269,6 +302,9 @@ class SimClient:
         if not self._closed:
             self._closed = True
             self.bullet.disconnect()
+            if self.display is not None:
+                with quiet_stdout():  # the GUI prints its threads' shutdown
+                    self.display.disconnect()
 
     def _require_open(self) -> None:
         if self._closed:
@@ -286,6 +322,6 @@ class SimClient:
         self.close()
 
     def __repr__(self) -> str:
-        mode = "GUI" if self.gui else "DIRECT"
+        mode = "DIRECT+GUI" if self.gui else "DIRECT"
         state = "closed" if self._closed else f"t={self.sim_time:.3f}s"
         return f"SimClient({mode}, dt={self.time_step:.6g}s, {state})"

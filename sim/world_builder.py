@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from semistatic.colours import PERSON_COLOUR
 from worlds.spec import BoxSpec, PersonSpec, PostSpec, TestPieceSpec, WallSpec, WorldSpec
 
 __all__ = [
@@ -88,7 +89,8 @@ _RGBA = {
     TAG_WALL: (0.6, 0.6, 0.65, 1.0),
     TAG_POST: (0.95, 0.85, 0.1, 1.0),
     TAG_BOX: (0.7, 0.45, 0.2, 1.0),
-    TAG_PERSON: (0.2, 0.4, 0.9, 1.0),
+    # the palette's, as the GUI's legend shows it (blue is a new polyline's)
+    TAG_PERSON: (*PERSON_COLOUR, 1.0),
     TAG_TEST_PIECE: (0.1, 0.1, 0.1, 1.0),
 }
 

@@ -152,9 +152,9 @@ def check_new_rrd_path(path: str | os.PathLike[str], *, option: str = "--rrd",
                        out: Path | None = None) -> Path:
     """Return ``path`` if a recording can be written there, else raise ``ValueError``.
 
-    Called before a run, so a bad ``--rrd`` costs nothing: the name must end in ``.rrd``
-    and must not exist, its directory must exist (or be ``out``, written first), and it
-    must not be ``out`` itself.
+    Called before a run, so a bad ``--rrd`` costs nothing: the name must end in ``.rrd``,
+    its directory must exist, and it must not exist yet, unless it lies directly in
+    ``out``, the run's output directory (written first, replacing a previous result whole).
 
     Examples
     --------
@@ -172,14 +172,14 @@ def check_new_rrd_path(path: str | os.PathLike[str], *, option: str = "--rrd",
     if path.suffix != ".rrd":
         raise ValueError(f"{path}: {option}: a Rerun recording's name ends in .rrd; "
                          f"e.g. {option} run.rrd")
+    parent = path.resolve().parent
+    if out is not None and path.resolve() == out.resolve():
+        raise ValueError(f"{path}: {option}: is the --out directory; e.g. {option} OUT/run.rrd")
+    if out is not None and parent == out.resolve():
+        return path  # lands in the new result, which replaces the old one whole
     if path.exists() or path.is_symlink():
         raise ValueError(f"{path}: {option}: exists already; choose a new file name or "
                          "remove the old recording")
-    parent = path.resolve().parent
-    if out is not None and parent == out.resolve():
-        return path
-    if out is not None and path.resolve() == out.resolve():
-        raise ValueError(f"{path}: {option}: is the --out directory; e.g. {option} OUT/run.rrd")
     if not parent.is_dir():
         raise ValueError(f"{path}: {option}: the directory {path.parent} does not exist; "
                          "create it first")
@@ -244,8 +244,10 @@ def open_timeline(rrd: Path | None, viewer: str | None, out: Path | None,
         except ValueError as error:
             raise InputError(str(error)) from None
         parent = rrd.resolve().parent
-        # A recording inside --out is staged beside --out (same file system), then moved in.
-        staging = parent if parent.is_dir() else out.resolve().parent
+        # A recording inside --out is staged beside --out (same file system), then moved
+        # into the new result: staged inside, the result replacing the old one takes it.
+        inside = out is not None and parent == out.resolve()
+        staging = out.resolve().parent if inside else parent
     return RerunRecorder(rrd, viewer=viewer, recording_id=recording_id, staging_dir=staging)
 
 

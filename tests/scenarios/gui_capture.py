@@ -5,8 +5,9 @@ Run under a (virtual) display, from the repository root::
     xvfb-run -a -s "-screen 0 1024x768x24" python -m tests.scenarios.gui_capture OUT.png \\
         [--scenario sim1] [--seconds 12]
 
-Prints one JSON line: the robot's true pose, the camera target, the debug items drawn
-and the count of pixels of each drawing colour in the screenshot. The screenshot is the
+Prints one JSON line: the robot's true pose, the camera (target, pitch, yaw, distance),
+the debug items drawn, the count of pixels of each drawing colour in the screenshot, and
+of text-coloured pixels in the status area (the top tenth of the window). The screenshot is the
 X root window (``xwd``), decoded here: PyBullet's own camera image leaves debug items out.
 """
 
@@ -25,10 +26,12 @@ from matplotlib.image import imsave
 
 from scenarios import Testbench, load_scenario
 from scenarios.bench.gui import GuiView
+from semistatic.colours import TEXT_COLOUR
 
 # Drawing colours as 8-bit RGB, as the GUI renders them (scenarios.bench.gui).
 COLOURS = {"warning": (255, 153, 0), "protective": (229, 0, 0), "returns": (191, 0, 191),
            "confirmed": (0, 165, 0)}
+TEXT_RGB = tuple(round(255 * c) for c in TEXT_COLOUR)
 
 
 GUI_SETTLE_S = 1.0
@@ -51,9 +54,13 @@ def read_xwd(path: Path) -> np.ndarray:
 def colour_counts(rgb: np.ndarray, tolerance: int = 40) -> dict[str, int]:
     """Count the pixels near each drawing colour."""
     return {
-        name: int(np.count_nonzero(np.abs(rgb.astype(int) - colour).max(axis=2) <= tolerance))
-        for name, colour in COLOURS.items()
+        name: count_near(rgb, colour, tolerance) for name, colour in COLOURS.items()
     }
+
+
+def count_near(rgb: np.ndarray, colour: tuple[int, int, int], tolerance: int = 40) -> int:
+    """Count the pixels of ``rgb`` within ``tolerance`` of ``colour`` in every channel."""
+    return int(np.count_nonzero(np.abs(rgb.astype(int) - colour).max(axis=2) <= tolerance))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,10 +75,12 @@ def main(argv: list[str] | None = None) -> int:
         bench.reset()
         while bench.sim_time < args.seconds:
             bench.step()
-        camera = bench.sim.bullet.getDebugVisualizerCamera()
-        width, height = camera[0], camera[1]
-        view = next(o for o in bench.observers if isinstance(o, GuiView)).view
+        observer = next(o for o in bench.observers if isinstance(o, GuiView))
+        observer.draw(bench)  # the last redraw may lag: its wall-time budget (DRAW_SHARE)
+        view = observer.view
         time.sleep(GUI_SETTLE_S)  # the GUI renders on its own thread: let it show the last draw
+        camera = bench.sim.display.getDebugVisualizerCamera()
+        width, height = camera[0], camera[1]
         with tempfile.TemporaryDirectory() as folder:
             dump = Path(folder) / "screen.xwd"
             subprocess.run(["xwd", "-root", "-silent", "-out", str(dump)], check=True)
@@ -80,8 +89,13 @@ def main(argv: list[str] | None = None) -> int:
         report = {
             "true_pose": bench.true_pose.round(3).tolist(),
             "camera_target": [round(v, 3) for v in camera[11]],
+            "camera_pitch": round(camera[9], 2),
+            "camera_yaw": round(camera[8], 2),
+            "camera_distance": round(camera[10], 2),
             "items": {name: len(ids) for name, ids in view.items.items()},
-            "pixels": colour_counts(rgb),
+            # the world's part: the legend's colour samples stand right of it
+            "pixels": colour_counts(rgb[:, : 3 * width // 4]),
+            "status_text_pixels": count_near(rgb[: height // 10], TEXT_RGB, 60),
         }
     print(json.dumps(report))
     return 0

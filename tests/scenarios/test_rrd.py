@@ -278,3 +278,14 @@ def test_viewer_streams_to_a_listening_viewer_and_refuses_an_absent_one(tmp_path
         server.wait(timeout=10)
     assert status == 0
     assert f"scans to the Rerun viewer at {url}" in out
+
+
+def test_a_recording_inside_out_is_replaced_with_the_result(tmp_path, capsys):
+    scenario = write_tiny(tmp_path)
+    out = tmp_path / "out"
+    for _ in range(2):  # the second run replaces the first result, recording included
+        status, _, _ = run_cli(capsys, "run", scenario, "--laps", "1", "--no-figures",
+                               "--out", out, "--rrd", out / "run.rrd")
+        assert status == 0
+    assert (out / "run.rrd").stat().st_size > 0
+    assert not [path for path in tmp_path.rglob("*.partial")]
