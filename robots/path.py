@@ -416,9 +416,16 @@ def _heading(dx: ArrayLike, dy: ArrayLike) -> np.ndarray:
 def _curvature(dx: ArrayLike, dy: ArrayLike, ddx: ArrayLike, ddy: ArrayLike) -> np.ndarray:
     """Return the signed curvature from the first and second derivatives (arrays or floats).
 
-    numpy's hypot and power for floats too: math's round differently in the last bit.
+    numpy's hypot and power for floats too: math's round differently in the last bit. On
+    arrays numpy's power (SIMD since numpy 2.4) differs from its power on one float in the
+    last bit too, so an array's cubes are taken one float at a time: a batch query and
+    :meth:`SplinePath.frame` (the follower's) agree to the bit.
     """
-    return (dx * ddy - dy * ddx) / np.hypot(dx, dy) ** 3
+    norm = np.hypot(dx, dy)
+    if np.ndim(norm):
+        cube = np.fromiter((value ** 3 for value in norm.flat), float, norm.size)
+        return (dx * ddy - dy * ddx) / cube.reshape(norm.shape)
+    return (dx * ddy - dy * ddx) / norm ** 3
 
 
 def _cubic_table(cubic) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,8 @@ truth is read only by observers (scoring, Table 1, recording, progress).
 With ``[[vehicles]]`` a fleet shares the :class:`~scenarios.bench.scene.Scene`; each
 :class:`~scenarios.bench.vehicle.Vehicle` (``bench.vehicles``) runs the tick above with its
 own stack, laps and scoring. The bench is its first vehicle's
-:class:`~scenarios.bench.observer.VehicleView`; a vehicle done parks outside.
+:class:`~scenarios.bench.observer.VehicleView` (:mod:`scenarios.bench.lead_view`); a
+vehicle done parks outside.
 numba compiles the mapper's kernels on first use; :func:`semistatic.kernel_cache.
 warm_kernel_cache` compiles them ahead on every core (the CLI does; ``reset`` does not).
 
@@ -46,6 +47,7 @@ import numpy as np
 from robots.presets import UGVSpec
 from scenarios.bench.fleet import PARKING
 from scenarios.bench.gui import GuiView
+from scenarios.bench.lead_view import LeadVehicleView
 from scenarios.bench.observer import Observer, require_observer
 from scenarios.bench.policies import FieldPolicy
 from scenarios.bench.records import LapLog, RunLog, combine_logs
@@ -71,12 +73,7 @@ from worlds.spec import BoxSpec, WorldSpec
 __all__ = ["Testbench"]
 
 
-def _of_lead(name: str, doc: str) -> property:
-    """Return a read-only property reading ``name`` of the bench's first vehicle."""
-    return property(lambda bench: getattr(bench.fleet[0], name), doc=doc)
-
-
-class Testbench(SavedStates):
+class Testbench(SavedStates, LeadVehicleView):
     """A scenario's closed loop with an explicit life cycle, state to read and observers.
 
     Parameters
@@ -324,24 +321,7 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         return self.log
 
     # ------------------------------------------------------------------ the view
-    # The bench is the VehicleView of its first vehicle (scenarios.bench.observer).
-    name = _of_lead("name", "The first vehicle's name.")
-    segment = _of_lead("segment", "The path segment the first vehicle is on.")
-    lap_log = _of_lead("lap_log", "The first vehicle's current lap log.")
-    true_pose = _of_lead("true_pose", "The first vehicle's true pose (x, y, theta); for scoring.")
-    true_twist = _of_lead("true_twist", "The first vehicle's true (v_forward, v_left, omega).")
-    ekf_pose = _of_lead("ekf_pose", "The first vehicle's EKF pose estimate (x, y, theta).")
-    ekf_covariance = _of_lead("ekf_covariance", "The first vehicle's (3, 3) EKF covariance.")
-    local_maps = _of_lead("local_maps", "The first vehicle's local map of every segment.")
-    zone = _of_lead("zone", "The first vehicle's safety zone: free, warning or protective.")
-    speed_scale = _of_lead("speed_scale", "The first vehicle's speed factor (1 free, 0 stop).")
-    policy = _of_lead("policy", "The first vehicle's field policy (each vehicle has its own).")
-    lap = _of_lead("lap", "The current lap, from 1 (the last lap once the run is done).")
-    world = _of_lead("world", "The simulated world (boxes as they stand now).")
-    person_positions = _of_lead("person_positions", "Where the people stand now (or None).")
-    layout_revision = _of_lead("layout_revision", "Changes whenever a box moves.")
-    robot = _of_lead("robot", "The first vehicle's preset (footprint, lasers, wheels).")
-
+    # The bench is the VehicleView of its first vehicle (LeadVehicleView); besides:
     @property
     def spec(self) -> ScenarioSpec:
         """Return the scenario: of the run once reset (its seed applied), else as given."""
@@ -363,10 +343,6 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
     def sim_time(self) -> float:
         """Return the simulated seconds since the run started."""
         return self._sim.sim_time if self._sim is not None else self.log.sim_time_s
-
-    def vehicle_outlines(self) -> list[np.ndarray]:
-        """Return the true footprints of the fleet's vehicles (for scoring)."""
-        return self.fleet[0].vehicle_outlines()
 
     @property
     def sim(self) -> SimClient:

@@ -189,7 +189,7 @@ def main_falsify(args: argparse.Namespace) -> int:
     """Run ``semistatic falsify``; return 0, or 1 when some sample's run raised."""
     check_backend(args.backend, args.jobs, args.address)
     if args.rrd:
-        from scenarios.logs.rrd import rerun_missing
+        from scenarios.logs.rrd_options import rerun_missing
 
         if rerun_missing() is not None:
             raise InputError(f"--rrd: {rerun_missing()}")

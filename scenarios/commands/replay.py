@@ -15,7 +15,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-from scenarios.logs.rrd import DEFAULT_VIEWER_URL, open_timeline
+from scenarios.logs.rrd_options import DEFAULT_VIEWER_URL, open_timeline
 from scenarios.process.errors import InputError
 from scenarios.process.progress import scan_progress
 from scenarios.process.staging import check_output_dir

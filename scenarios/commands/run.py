@@ -23,7 +23,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from scenarios.logs.rrd import DEFAULT_VIEWER_URL, open_timeline
+from scenarios.logs.rrd_options import DEFAULT_VIEWER_URL, open_timeline
 from scenarios.process.errors import (
     EXIT_RUN_FAILED,
     InputError,

@@ -17,7 +17,7 @@ from robots.path import SplinePath
 from robots.presets import get_preset
 from scenarios.bench.records import LapLog, RunLog
 from scenarios.bench.safety_record import SafetyRecord
-from scenarios.results import outputs
+from scenarios.results import run_figures
 from scenarios.results.figures import ekf as ekf_figure
 from scenarios.results.figures import events as events_figure
 from scenarios.results.figures import laps as lap_figures
@@ -469,7 +469,7 @@ def drawn(tmp_path, monkeypatch):
 
         monkeypatch.setattr(module, "write_png", spy)
     log = run_log()
-    outputs.write_figures(log, tmp_path / "figures")
+    run_figures.write_figures(log, tmp_path / "figures")
     assert sorted(figures) == sorted(p.name for p in (tmp_path / "figures").iterdir())
     return log, figures
 
