@@ -20,6 +20,7 @@ from robots.safety import (
     scan_points_in_robot_frame,
 )
 from robots.triangulation import TriangulationError, triangulate
+from semistatic.cache_healing import heal_kernels
 
 __all__ = [
     "LGV",
@@ -50,3 +51,7 @@ __all__ = [
     "scan_points_in_robot_frame",
     "triangulate",
 ]
+
+# A damaged numba cache file of a kernel is deleted and the kernel compiled again,
+# instead of failing every run (semistatic/cache_healing.py): before any kernel runs.
+heal_kernels("robots")

@@ -19,8 +19,8 @@ import sys
 from collections.abc import Sequence
 
 from scenarios.commands import campaign, compare, evaluate, falsify, replay, run, tune
-from scenarios.process.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, InputError
-from semistatic.errors import SpecError
+from scenarios.process.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, InputError, check_jobs
+from semistatic.errors import SpecError, caused_by_interrupt
 
 __all__ = ["console_main", "main"]
 
@@ -64,6 +64,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "evaluate": evaluate.main_evaluate, "campaign": campaign.main_campaign,
                 "compare": compare.main_compare, "falsify": falsify.main_falsify}
     try:
+        if getattr(args, "jobs", None) is not None:
+            # Now, before the kernel compilation below forks workers of its own: a --jobs
+            # out of range must not start a process before it is refused.
+            check_jobs(args.jobs)
         if args.command in COMPILING_COMMANDS:
             from semistatic.kernel_cache import warm_kernel_cache
 
@@ -72,8 +76,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warm_kernel_cache()
         return handlers[args.command](args)
     except (SpecError, InputError) as error:
-        # One line, whatever a library put into the message.
-        print("error: " + " ".join(str(error).split()), file=sys.stderr)
+        print("error: " + _one_line(str(error)), file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted; earlier results are left as they were", file=sys.stderr)
@@ -81,34 +84,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemError as error:
         # Ctrl-C while numba unpickles a cached kernel reaches us as a SystemError
         # ("returned a result with an exception set") caused by the KeyboardInterrupt.
-        if not _caused_by_interrupt(error):
+        if not caused_by_interrupt(error):
             raise
         print("interrupted; earlier results are left as they were", file=sys.stderr)
         return EXIT_INTERRUPTED
 
 
-def _caused_by_interrupt(error: BaseException) -> bool:
-    """Return whether a KeyboardInterrupt is among the causes of ``error``.
+def _one_line(message: str) -> str:
+    r"""Return ``message`` as one line of printable text.
+
+    Whatever a library (or a file name, or an option's value) put into the message: a
+    run of whitespace becomes one space, and a control character that is left (an ESC
+    that would recolour the terminal) is shown escaped.
 
     Examples
     --------
-    >>> try:
-    ...     try:
-    ...         raise KeyboardInterrupt
-    ...     except KeyboardInterrupt as interrupt:
-    ...         raise SystemError("returned a result with an exception set") from interrupt
-    ... except SystemError as wrapped:
-    ...     _caused_by_interrupt(wrapped), _caused_by_interrupt(SystemError("other"))
-    (True, False)
+    >>> _one_line("w.toml: name:\n  bad \x1b[31mred")
+    'w.toml: name: bad \\x1b[31mred'
     """
-    seen: set[int] = set()
-    cause: BaseException | None = error
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, KeyboardInterrupt):
-            return True
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
-    return False
+    text = " ".join(message.split())
+    return "".join(char if char.isprintable() else char.encode("unicode_escape").decode()
+                   for char in text)
 
 
 def console_main(argv: Sequence[str] | None = None) -> None:

@@ -18,6 +18,7 @@ Examples
 
 from semistatic.alignment import Alignment, AlignmentParams, align_points
 from semistatic.association import associate
+from semistatic.cache_healing import heal_kernels
 from semistatic.extraction import douglas_peucker, extract_polylines
 from semistatic.hausdorff import hausdorff, restrict, restricted_hausdorff
 from semistatic.join import merge_group, overlapping_groups
@@ -55,3 +56,7 @@ __all__ = [
     "similarity",
     "tangent_function",
 ]
+
+# A damaged numba cache file of a kernel is deleted and the kernel compiled again,
+# instead of failing every run (semistatic/cache_healing.py): before any kernel runs.
+heal_kernels("semistatic")

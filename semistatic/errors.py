@@ -11,7 +11,7 @@ True
 
 from __future__ import annotations
 
-__all__ = ["MEMORY", "SpecError", "join_key"]
+__all__ = ["MEMORY", "SpecError", "caused_by_interrupt", "join_key"]
 
 MEMORY = "<memory>"
 """The ``file`` of a spec built in Python rather than loaded from a file."""
@@ -78,3 +78,30 @@ class SpecError(ValueError):
         'walls[1]'
         """
         return SpecError(file, join_key(prefix, self.key), self.message)
+
+
+def caused_by_interrupt(error: BaseException) -> bool:
+    """Return whether a KeyboardInterrupt is among the causes of ``error``.
+
+    Ctrl-C inside compiled or C code (numba's unpickling, PyBullet) reaches Python as
+    another exception (e.g. ``SystemError``) caused by the interrupt, which must go on.
+
+    Examples
+    --------
+    >>> try:
+    ...     try:
+    ...         raise KeyboardInterrupt
+    ...     except KeyboardInterrupt as interrupt:
+    ...         raise SystemError("returned a result with an exception set") from interrupt
+    ... except SystemError as wrapped:
+    ...     caused_by_interrupt(wrapped), caused_by_interrupt(SystemError("other"))
+    (True, False)
+    """
+    seen: set[int] = set()
+    cause: BaseException | None = error
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False

@@ -54,6 +54,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from semistatic.cache_healing import HealingCache, heal
 from semistatic.frames import wrap_angle_compiled
 
 __all__ = [
@@ -204,11 +205,14 @@ def _index_state(dispatcher: object) -> str:
 
     numba's own reading of the index: an index written for another version of the
     source file (or of numba) loads as empty, and numba compiles the function again.
-    A function numba does not cache reads ``"current"`` (nothing to compile ahead).
+    A function numba does not cache reads ``"current"`` (nothing to compile ahead). An
+    unreadable index is deleted and reads ``"missing"`` (:mod:`semistatic.cache_healing`).
     """
-    cache_file = getattr(dispatcher._cache, "_cache_file", None)
-    if cache_file is None or cache_file._load_index():
+    heal(dispatcher)  # a kernel of a module its package's import did not heal
+    cache = dispatcher._cache
+    if not isinstance(cache, HealingCache) or cache.index():
         return "current"
+    cache_file = cache._cache_file
     return "obsolete" if os.path.exists(cache_file._index_path) else "missing"
 
 

@@ -53,6 +53,7 @@ from semistatic.mapper import STATUSES, MapPolyline, PolylineMap, UpdateReport
 from semistatic.params import MapperParams
 from semistatic.polyline import EMPTY_BOX, Polyline
 from semistatic.types import Scan
+from semistatic.validation import loads_json
 
 __all__ = ["LocalMap"]
 
@@ -372,7 +373,7 @@ class LocalMap:
         """
         path = Path(path)
         try:
-            collection = json.loads(path.read_text())
+            collection = loads_json(path.read_text(), file=str(path))
         except json.JSONDecodeError as error:
             raise ValueError(f"{path}: not valid JSON ({error})") from None
         return cls.from_geojson(collection, params=params, source=str(path))

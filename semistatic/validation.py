@@ -38,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import functools
+import json
 import math
 import re
 import tomllib
@@ -63,10 +64,14 @@ __all__ = [
     "as_table",
     "bounds",
     "check_fields",
+    "check_nesting",
+    "check_printable",
     "convert",
     "did_you_mean",
     "from_table",
+    "loads_json",
     "or_object",
+    "printable",
     "read_toml",
     "reject_unknown_keys",
     "safe_name",
@@ -83,6 +88,29 @@ SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 """Names that may become file or folder names: no separators, no leading dot, <= 64 chars."""
 
 _TOML_POSITION = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
+
+MAX_NESTING = 64
+"""Deepest nesting of arrays and tables a TOML or JSON input may have.
+
+Real files nest fewer than 10 levels; the parsers recurse once per level and die of a
+``RecursionError`` (tomllib near 500 levels, json near 1000), and so would the code that
+walks what they return.
+"""
+
+# The tokens that decide the nesting: strings and comments (whose brackets do not count),
+# then the brackets. The leftmost match wins, so a quote or a ``#`` inside a string never
+# starts a token of its own.
+_NESTING_TOKENS = {
+    "toml": re.compile("|".join([
+        r'"""(?:[^\\]|\\.)*?"{3,5}',  # multi-line basic string (may end in 1-2 quotes)
+        r"'''.*?'{3,5}",  # multi-line literal string
+        r'"(?:[^"\\\n]|\\[^\n])*"',  # basic string
+        r"'[^'\n]*'",  # literal string
+        r"#[^\n]*",  # comment
+        r"[\[\]{}]",
+    ]), re.DOTALL),
+    "json": re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]', re.DOTALL),
+}
 
 
 @dataclass(frozen=True)
@@ -192,6 +220,95 @@ def or_object() -> dict[str, bool]:
     {'or_object': True}
     """
     return {"or_object": True}
+
+
+def printable() -> dict[str, bool]:
+    """Return field metadata for a name that is printed: see :func:`check_printable`.
+
+    Examples
+    --------
+    >>> printable()
+    {'printable': True}
+    """
+    return {"printable": True}
+
+
+def check_printable(value: str, *, file: str, key: str) -> str:
+    r"""Return ``value`` unless it holds a character that is not printable.
+
+    Names are printed as they are; an escape sequence in one would recolour or rewrite
+    the terminal, a line break would split a one-line message. ``" "`` passes; tabs, line
+    breaks, ESC, the other control and format characters and the other spaces do not
+    (:meth:`str.isprintable`). The message shows the name escaped (``repr``), never raw.
+
+    Examples
+    --------
+    >>> check_printable("tiny hall", file="w.toml", key="name")
+    'tiny hall'
+    >>> check_printable("\x1b[31mred", file="w.toml", key="name")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: w.toml: name: '\x1b[31mred' holds the unprintable character ...
+    """
+    for position, char in enumerate(value):
+        if not char.isprintable():
+            raise SpecError(file, key, f"{value!r} holds the unprintable character {char!r} at "
+                            f"position {position}; use printable characters only")
+    return value
+
+
+def check_nesting(text: str, *, file: str, key: str = FILE_KEY, syntax: str = "toml") -> None:
+    """Raise :class:`SpecError` if arrays and tables in ``text`` nest deeper than allowed.
+
+    The limit is ``MAX_NESTING`` (64) levels.
+
+    Call it before parsing user TOML (``syntax="toml"``) or JSON (``"json"``): the
+    parsers recurse once per level, so a file of 100000 ``[`` would end them in a
+    ``RecursionError`` instead of one error line. Brackets inside strings and comments
+    do not count; the scan is a regular expression over the text, and skipped entirely
+    when the text opens too few brackets to nest that deep.
+
+    Examples
+    --------
+    >>> check_nesting('knots = [[0, 0], [1, 2]]  # "[[[" in a comment', file="w.toml")
+    >>> check_nesting("[" * 65 + "]" * 65, file="m.json", syntax="json")
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: m.json: <file>: arrays and tables nest deeper than 64 \
+levels (at line 1); no input needs more than a few
+    """
+    if text.count("[") + text.count("{") <= MAX_NESTING:
+        return  # it cannot nest deeper than it opens: most files end here
+    depth = 0
+    for token in _NESTING_TOKENS[syntax].finditer(text):
+        bracket = token.group()
+        if bracket in ("[", "{"):
+            depth += 1
+            if depth > MAX_NESTING:
+                line = text.count("\n", 0, token.start()) + 1
+                raise SpecError(file, key, f"arrays and tables nest deeper than {MAX_NESTING} "
+                                f"levels (at line {line}); no input needs more than a few")
+        elif bracket in ("]", "}"):
+            # A stray closer (a broken file) must not hide the nesting that follows it.
+            depth = max(depth - 1, 0)
+
+
+def loads_json(text: str, *, file: str, key: str = FILE_KEY) -> Any:
+    """Parse user JSON ``text``, refusing deep nesting first (:func:`check_nesting`).
+
+    Malformed JSON raises ``json.JSONDecodeError`` as :func:`json.loads` does.
+
+    Examples
+    --------
+    >>> loads_json('{"kind": "campaign", "seeds": [0, 1]}', file="manifest.json")
+    {'kind': 'campaign', 'seeds': [0, 1]}
+    >>> loads_json('{"a": ' + "[" * 100000, file="manifest.json")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: manifest.json: <file>: arrays and tables nest deeper than 64 ...
+    """
+    check_nesting(text, file=file, key=key, syntax="json")
+    return json.loads(text)
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
@@ -496,6 +613,7 @@ def check_fields(obj: Any) -> None:
     against the field's type and range metadata, so a spec built in Python fails with
     the same message as a file (its file reads ``<memory>``, its key is the field's
     name); a field with :func:`safe_name` metadata must match ``SAFE_NAME``, one with
+    :func:`printable` metadata must pass :func:`check_printable`, one with
     :func:`unlimited` metadata may also be ``math.inf``. Nested dataclasses validate
     themselves. Call it first in ``__post_init__``.
 
@@ -524,6 +642,8 @@ def check_fields(obj: Any) -> None:
             object.__setattr__(obj, name, math.inf)
             continue
         value = convert(hint, _as_toml(given), file=MEMORY, key=name, valid=metadata.get("range"))
+        if metadata.get("printable"):
+            check_printable(value, file=MEMORY, key=name)
         if metadata.get("safe_name") and not SAFE_NAME.fullmatch(value):
             raise SpecError(
                 MEMORY, name,
@@ -536,7 +656,9 @@ def check_fields(obj: Any) -> None:
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a TOML file, reporting a missing file or a syntax error as :class:`SpecError`.
 
-    A syntax error is reported at key ``"line L, column C"`` with tomllib's message.
+    A syntax error is reported at key ``"line L, column C"`` with tomllib's message;
+    arrays and tables nested too deep for the parser, before it starts
+    (:func:`check_nesting`).
 
     Examples
     --------
@@ -560,6 +682,7 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise SpecError(
             str(path), FILE_KEY, f"not a TOML file: not UTF-8 text (byte {error.start})"
         ) from None
+    check_nesting(text, file=str(path))
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:

@@ -45,7 +45,14 @@ import numpy as np
 import shapely
 
 from semistatic.errors import MEMORY, SpecError
-from semistatic.validation import SAFE_NAME, bounds, check_fields, did_you_mean, safe_name
+from semistatic.validation import (
+    SAFE_NAME,
+    bounds,
+    check_fields,
+    did_you_mean,
+    printable,
+    safe_name,
+)
 
 __all__ = [
     "BOX_SIZE",
@@ -705,7 +712,7 @@ class WorldSpec:
     Parameters
     ----------
     name
-        World name (default: the file's stem).
+        World name (default: the file's stem); printable characters only.
     walls
         Static walls (array of inline tables).
     posts
@@ -735,7 +742,8 @@ class WorldSpec:
 radii 0.04 + 0.04 m)
     """
 
-    name: str
+    # Any printable text (it defaults to the file's stem), never a control character.
+    name: str = field(metadata=printable())
     walls: tuple[WallSpec, ...]
     posts: tuple[PostSpec, ...]
     boxes: tuple[BoxSpec, ...]

@@ -26,6 +26,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+from semistatic.errors import SpecError
+from semistatic.validation import loads_json
+
 __all__ = ["JOURNAL_FILE", "Journal", "JournalEntry", "read_journal"]
 
 JOURNAL_FILE = "runs.jsonl"
@@ -46,8 +49,8 @@ def read_journal(path: Path) -> dict[str, JournalEntry]:
     with path.open("rb") as lines:
         for line in lines:
             try:
-                entry = json.loads(line)
-            except (json.JSONDecodeError, UnicodeDecodeError):
+                entry = loads_json(line.decode(), file=str(path))
+            except (json.JSONDecodeError, UnicodeDecodeError, SpecError):
                 continue
             if isinstance(entry, dict) and isinstance(entry.get("run"), str):
                 entries.setdefault(entry["run"], (entry.get("metrics"), entry.get("error")))

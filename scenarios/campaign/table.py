@@ -35,6 +35,7 @@ import pyarrow.parquet
 from scenarios.bench.safety_record import INFRACTION_KINDS
 from scenarios.process.staging import write_atomic
 from semistatic.errors import SpecError
+from semistatic.validation import loads_json
 
 __all__ = [
     "CSV_FILE",
@@ -162,7 +163,7 @@ def read_campaign(path: str | Path, *, option: str = "campaign") -> CampaignResu
             raise SpecError(option, str(required), "missing: not a finished campaign (run the "
                             "same `semistatic campaign` command again to finish it)")
     try:
-        manifest = json.loads(manifest_file.read_text())
+        manifest = loads_json(manifest_file.read_text(), file=option, key=str(manifest_file))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
         raise SpecError(option, str(manifest_file), f"unreadable: {error}") from None
     if not isinstance(manifest, dict) or manifest.get("kind") != KIND:

@@ -201,7 +201,8 @@ KEY=normal(MEAN, SIGMA) or KEY=choice(V1, V2, ...), got '0.1'
         except SpecError as error:
             raise SpecError(VARY_OPTION, key, error.message) from None
     else:
-        values = tuple(parse_override(f"{key}={part.strip()}")[1] for part in arguments.split(","))
+        values = tuple(parse_override(f"{key}={part.strip()}", option=VARY_OPTION)[1]
+                       for part in arguments.split(","))
         bad = [value for value in values if not _is_number(value)]
         if bad:
             raise SpecError(VARY_OPTION, key, f"{name}() takes numbers, got {bad[0]!r}")

@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from scenarios.process.errors import check_jobs
 from scenarios.process.progress import count_progress
 from scenarios.process.staging import check_output_dir
 from scenarios.spec.load import scenario_help
@@ -137,13 +138,13 @@ def main_tune(args: argparse.Namespace) -> int:
     --------
     >>> parser = argparse.ArgumentParser()
     >>> _ = add_parser(parser.add_subparsers())
-    >>> main_tune(parser.parse_args(["tune", "sim1", "--grid", "mapper.gate=0.1", "--jobs", "0"]))
+    >>> args = parser.parse_args(["tune", "sim1", "--grid", "mapper.gate=0.1", "--jobs", "0"])
+    >>> main_tune(args)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    semistatic.errors.SpecError: --jobs: jobs: must be >= 1, got 0
+    semistatic.errors.SpecError: --jobs: jobs: must be >= 1 and <= ..., got 0 (4 per CPU of ...
     """
-    if args.jobs < 1:
-        raise SpecError("--jobs", "jobs", f"must be >= 1, got {args.jobs}")
+    check_jobs(args.jobs)
     if getattr(args, "params", None):
         from scenarios.tuning.study import main_search  # Optuna only when searching
 

@@ -51,6 +51,7 @@ from scenarios.process.staging import check_writable_parent
 from scenarios.spec.layout import lap_worlds
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
+from semistatic.validation import loads_json
 
 __all__ = [
     "FORMAT",
@@ -335,13 +336,15 @@ def read_recording(path: str | os.PathLike[str]) -> Recording:
     """
     path = Path(path)
     try:
-        manifest = json.loads((path / MANIFEST).read_text())
+        manifest = loads_json((path / MANIFEST).read_text(), file=RECORDING_OPTION, key=MANIFEST)
     except FileNotFoundError:
         raise SpecError(
             RECORDING_OPTION, MANIFEST,
             f"{path} is not a recording (no {MANIFEST}); make one with "
             "`semistatic run SCENARIO --record DIR`",
         ) from None
+    except SpecError:
+        raise  # nested too deep: already one line naming --recording (a ValueError too)
     except (OSError, ValueError) as error:
         raise SpecError(RECORDING_OPTION, MANIFEST, f"cannot read {path / MANIFEST}: {error}") \
             from None

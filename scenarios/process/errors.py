@@ -8,10 +8,10 @@ complete exits with 1; an interruption with 130.
 Examples
 --------
 >>> check_jobs(2)
->>> check_jobs(0)
+>>> check_jobs(0)  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-semistatic.errors.SpecError: --jobs: jobs: must be >= 1 and <= 256, got 0
+semistatic.errors.SpecError: --jobs: jobs: must be >= 1 and <= ..., got 0 (4 per CPU of the ...
 """
 
 from __future__ import annotations
@@ -26,27 +26,78 @@ __all__ = [
     "EXIT_BAD_INPUT",
     "EXIT_INTERRUPTED",
     "EXIT_RUN_FAILED",
-    "MAX_JOBS",
+    "JOBS_PER_CPU",
     "InputError",
     "check_display",
     "check_jobs",
+    "max_jobs",
+    "usable_cpus",
 ]
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
 EXIT_INTERRUPTED = 130
 
-MAX_JOBS = 256
-"""More worker processes than this is a typo, not a machine."""
+JOBS_PER_CPU = 4
+"""More worker processes per CPU than this is a typo, not a machine (see :func:`max_jobs`)."""
 
 
 class InputError(Exception):
     """Bad input the user can fix; printed as one ``error:`` line, exit status 2."""
 
 
+def usable_cpus() -> int:
+    """Return how many CPUs this process may run on (its affinity mask, where there is one).
+
+    ``os.cpu_count()`` counts the machine's CPUs, also those a container or ``taskset``
+    keeps this process off.
+
+    Examples
+    --------
+    >>> 1 <= usable_cpus() <= (os.cpu_count() or 1)
+    True
+    """
+    if hasattr(os, "sched_getaffinity"):
+        return max(len(os.sched_getaffinity(0)), 1)
+    return os.cpu_count() or 1
+
+
+def max_jobs() -> int:
+    """Return the most ``--jobs`` a command accepts: ``JOBS_PER_CPU`` per usable CPU.
+
+    A run is CPU-bound, so more workers than CPUs only share them; a few per CPU are
+    still allowed (a command line written for a somewhat bigger machine runs), a hundred
+    thousand would fork until the machine gives out. At least ``JOBS_PER_CPU`` on one
+    CPU.
+
+    Examples
+    --------
+    >>> max_jobs() == JOBS_PER_CPU * usable_cpus()
+    True
+    """
+    return JOBS_PER_CPU * usable_cpus()
+
+
 def check_jobs(jobs: int) -> None:
-    """Raise :class:`~semistatic.errors.SpecError` naming ``--jobs`` unless 1 <= jobs <= 256."""
-    as_int(jobs, file="--jobs", key="jobs", valid=Range(ge=1, le=MAX_JOBS))
+    """Raise :class:`~semistatic.errors.SpecError` naming ``--jobs`` unless 1 <= jobs <= max.
+
+    The maximum is :func:`max_jobs`; the message states it and the CPUs it comes from.
+    :func:`scenarios.cli.main` calls it before any process starts (the kernel compilation
+    forks too); the commands call it again for a caller that skips the command line.
+
+    Examples
+    --------
+    >>> check_jobs(max_jobs())
+    >>> check_jobs(max_jobs() + 1)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --jobs: jobs: must be >= 1 and <= ..., got ... (4 per CPU ...
+    """
+    cpus = usable_cpus()
+    as_int(jobs, file="--jobs", key="jobs", valid=Range(
+        ge=1, le=JOBS_PER_CPU * cpus,
+        fix=f"{JOBS_PER_CPU} per CPU of the {cpus} this process may use",
+    ))
 
 
 def check_display(gui: bool) -> None:

@@ -38,6 +38,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from semistatic.errors import SpecError
+from semistatic.validation import loads_json
 
 __all__ = [
     "LEGACY_RESULT_FILES",
@@ -234,9 +235,9 @@ directory
         raise SpecError("--out", str(out), "exists and is not a directory; choose a directory")
     if out.is_dir() and manifest_file.is_file():
         try:
-            found = json.loads(manifest_file.read_text())
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            found = None
+            found = loads_json(manifest_file.read_text(), file="--out", key=str(manifest_file))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, SpecError):
+            found = None  # unreadable or absurdly nested: not a manifest this command wrote
         if not isinstance(found, dict) or found.get("kind") != kind:
             raise SpecError("--out", str(out), f"holds a result that is not a {noun}; choose "
                             "a new or empty directory")

@@ -33,6 +33,7 @@ from semistatic.params import MapperParams
 from semistatic.validation import (
     FILE_KEY,
     as_table,
+    check_nesting,
     convert,
     did_you_mean,
     from_table,
@@ -144,11 +145,16 @@ occlusion_hall, pal1, pal3a, pal3b, sim1, sim2, warehouse, warehouse_fleet, ware
     raise SpecError(text, FILE_KEY, f"no such file (bundled scenarios: {', '.join(names)})")
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """Split ``"section.key=value"`` into its key path and a TOML-typed value.
+def parse_override(text: str, *, option: str = OVERRIDE_FILE) -> tuple[list[str], Any]:
+    r"""Split ``"section.key=value"`` into its key path and a TOML-typed value.
 
     The value is read as a TOML value (``0.15``, ``true``, ``[1, 2, 0]``, ``"adaptive"``);
-    a bare word that is not TOML is taken as a string, so ``policy=adaptive`` works.
+    a bare word that is not TOML is taken as a string, so ``policy=adaptive`` works. One
+    text sets one key: a line break (after which TOML would read another ``key = value``)
+    or another unprintable character is refused, and so is a value nested deeper than
+    the files may be (:func:`semistatic.validation.check_nesting`). ``option`` names the
+    command-line option in errors (``--set``; ``--grid`` and ``--vary`` read their values
+    here too).
 
     Examples
     --------
@@ -156,16 +162,30 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     (['mapper', 'gate'], 0.15)
     >>> parse_override("policy=adaptive")
     (['policy'], 'adaptive')
+    >>> parse_override("seed=3\nlaps=7")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --set: 'seed=3\nlaps=7': holds a line break ('\n'); ...
     """
+    for char in text:
+        # A tab is TOML whitespace; anything else unprintable has no place in one value.
+        if char != "\t" and not char.isprintable():
+            what = "a line break" if char in "\n\r" else "an unprintable character"
+            raise SpecError(option, repr(text), f"holds {what} ({char!r}); one {option} sets "
+                            f"one KEY=VALUE on one line: give each key its own {option}")
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key or any(not part for part in key.split(".")):
-        raise SpecError(OVERRIDE_FILE, text, "expected KEY=VALUE, e.g. mapper.gate=0.15")
+        raise SpecError(option, text, "expected KEY=VALUE, e.g. mapper.gate=0.15")
+    check_nesting(raw, file=option, key=key)
     try:
-        value = tomllib.loads(f"value = {raw.strip()}")["value"]
+        parsed = tomllib.loads(f"value = {raw.strip()}")
     except tomllib.TOMLDecodeError:
-        value = raw.strip()
-    return key.split("."), value
+        return key.split("."), raw.strip()
+    if list(parsed) != ["value"]:  # one line cannot hold two keys; kept as the invariant
+        raise SpecError(option, key, f"{raw.strip()!r} sets more than one key; give each "
+                        f"KEY=VALUE its own {option}")
+    return key.split("."), parsed["value"]
 
 
 def _known_keys(cls: type) -> dict[str, Any]:

@@ -106,7 +106,7 @@ def parse_grid(text: str) -> tuple[str, tuple[Any, ...]]:
         raise SpecError(GRID_OPTION, key, "empty grid: give values, e.g. mapper.gate=0.08,0.12")
     if "" in items:
         raise SpecError(GRID_OPTION, key, f"empty value in {raw.strip()!r}: drop the extra comma")
-    values = tuple(parse_override(f"{key}={item}")[1] for item in items)
+    values = tuple(parse_override(f"{key}={item}", option=GRID_OPTION)[1] for item in items)
     for position, value in enumerate(values):
         if value in values[:position]:
             raise SpecError(

@@ -3,6 +3,7 @@ the option, nothing written, and no PyBullet started (issue 12's failure classes
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -21,6 +22,11 @@ def no_simulation(monkeypatch):
         raise AssertionError("PyBullet started before the input was validated")
 
     monkeypatch.setattr(SimClient, "__init__", refuse)
+
+
+FORKS: list[int] = []
+os.register_at_fork(before=lambda: FORKS.append(os.getpid()))
+"""Every fork of this process (a worker pool's or the kernel compilation's), as it happens."""
 
 
 def _files(folder: Path) -> set[Path]:
@@ -120,6 +126,94 @@ def test_box_names_are_names_not_paths(capsys, tmp_path, no_simulation):
 def test_a_directory_given_as_scenario_says_so(capsys, tmp_path, no_simulation):
     _expect_error(capsys, tmp_path, "run", tmp_path,
                   fragments=[str(tmp_path), "is a directory", "scenario .toml"])
+
+
+# --- input robustness: one key per --set, printable names, --jobs, nesting ---------------
+
+@pytest.mark.parametrize(
+    ("text", "shown"),
+    [("seed=3\nlaps=7", "a line break ('\\n')"), ("seed=3\rlaps=7", "a line break ('\\r')")],
+    ids=["newline", "cr"],
+)
+def test_set_takes_one_key_on_one_line(capsys, tmp_path, no_simulation, text, shown):
+    err = _expect_error(capsys, tmp_path, "check", "sim1", "--set", text,
+                        fragments=[f"error: --set: {text!r}: holds {shown}; one --set sets "
+                                   "one KEY=VALUE on one line: give each key its own --set"])
+    assert "\r" not in err
+
+
+def test_a_world_name_with_an_escape_sequence_is_refused_escaped(capsys, tmp_path,
+                                                                 no_simulation):
+    scenario = _tiny_with_world(tmp_path, 'name = "tiny"', 'name = "\\u001b[31mred"')
+    err = _expect_error(capsys, tmp_path, "check", scenario,
+                        fragments=["tiny_world.toml: name: '\\x1b[31mred' holds the "
+                                   "unprintable character '\\x1b' at position 0"])
+    assert "\x1b" not in err
+
+
+def test_an_escape_sequence_in_a_file_name_is_printed_escaped(capsys, tmp_path, no_simulation):
+    # The error names the file as typed; the one line still holds no raw ESC.
+    err = _expect_error(capsys, tmp_path, "check", tmp_path / "\x1b[31mnone.toml",
+                        fragments=["\\x1b[31mnone.toml: <file>: no such file"])
+    assert "\x1b" not in err
+
+
+def _jobs_limit() -> int:
+    """4 per CPU this process may run on, as ``nproc`` counts them."""
+    return 4 * len(os.sched_getaffinity(0))
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["table"], ["tune", "sim1", "--grid", "mapper.gate=0.1,0.2"], ["campaign", "sim1"],
+     ["falsify", "sim1", "--vary", "safety.slowdown=uniform(0.3, 0.6)"]],
+    ids=["table", "tune", "campaign", "falsify"],
+)
+def test_jobs_above_4_per_cpu_are_refused_before_any_process(capsys, tmp_path, no_simulation,
+                                                             command):
+    limit = _jobs_limit()
+    forks = len(FORKS)
+    _expect_error(capsys, tmp_path, *command, "--jobs", limit + 1, "--out", tmp_path / "out",
+                  fragments=[f"error: --jobs: jobs: must be >= 1 and <= {limit}, got "
+                             f"{limit + 1} (4 per CPU of the {limit // 4} this process may use)"])
+    assert len(FORKS) == forks  # neither a worker pool nor the kernel compilation forked
+    _expect_error(capsys, tmp_path, *command, "--jobs", 100_000, "--out", tmp_path / "out",
+                  fragments=["--jobs", f"<= {limit}, got 100000"])
+    assert len(FORKS) == forks
+
+
+def test_a_world_nested_100000_deep_is_one_line(capsys, tmp_path, no_simulation):
+    scenario = write_tiny(tmp_path)
+    nested = "deep = " + "[" * 100_000 + "]" * 100_000 + "\n"
+    (tmp_path / "tiny_world.toml").write_text(TINY_WORLD + nested)
+    line = TINY_WORLD.count("\n") + 1
+    _expect_error(capsys, tmp_path, "check", scenario,
+                  fragments=[f"{scenario}: world: {tmp_path / 'tiny_world.toml'}: arrays and "
+                             f"tables nest deeper than 64 levels (at line {line})"])
+    (tmp_path / "tiny_world.toml").write_text(TINY_WORLD)
+    scenario.write_text(scenario.read_text() + nested)
+    _expect_error(capsys, tmp_path, "check", scenario,
+                  fragments=[f"{scenario}: <file>: arrays and tables nest deeper than 64 levels"])
+    _expect_error(capsys, tmp_path, "check", "sim1", "--set", "people=" + "[" * 100_000,
+                  fragments=["error: --set: people: arrays and tables nest deeper than 64"])
+
+
+def test_manifests_nested_100000_deep_are_one_line(capsys, tmp_path, no_simulation):
+    nested = "[" * 100_000 + "]" * 100_000
+    recording = tmp_path / "recording"
+    recording.mkdir()
+    (recording / "manifest.json").write_text(nested)
+    _expect_error(capsys, tmp_path, "tune", "sim1", "--grid", "mapper.gate=0.1,0.2",
+                  "--recording", recording, "--out", tmp_path / "out",
+                  fragments=["error: --recording: manifest.json: arrays and tables nest deeper "
+                             "than 64 levels (at line 1)"])
+    campaign = tmp_path / "campaign"
+    campaign.mkdir()
+    (campaign / "manifest.json").write_text('{"kind": ' + nested + "}")
+    (campaign / "runs.parquet").write_bytes(b"")
+    _expect_error(capsys, tmp_path, "compare", campaign, campaign,
+                  fragments=[f"error: BASELINE: {campaign / 'manifest.json'}: arrays and tables "
+                             "nest deeper than 64 levels (at line 1)"])
 
 
 # --- 2. outputs are checked before the work ----------------------------------------------

@@ -230,6 +230,48 @@ def test_parse_override_reads_toml_values():
     assert parse_override(" safety.slowdown = 0.3 ") == (["safety", "slowdown"], 0.3)
     assert parse_override("people=[]") == (["people"], [])
     assert parse_override("description=two words") == (["description"], "two words")
+    assert parse_override("description=a\tb") == (["description"], "a\tb")  # TOML whitespace
+
+
+@pytest.mark.parametrize(
+    ("text", "shown"),
+    [
+        ("seed=3\nlaps=7", "a line break ('\\n')"),  # TOML would read a second key
+        ("seed=3\r\nlaps=7", "a line break ('\\r')"),
+        ("seed=3\rlaps=7", "a line break ('\\r')"),
+        ('description="a"\n[mapper]\ngate=0.3', "a line break ('\\n')"),
+        ("policy=\x1b[31madaptive", "an unprintable character ('\\x1b')"),
+    ],
+    ids=["newline", "crlf", "cr", "table", "escape"],
+)
+def test_one_set_sets_one_key_on_one_line(text, shown):
+    with pytest.raises(SpecError) as info:
+        parse_override(text)
+    assert (info.value.file, info.value.key) == (OVERRIDE_FILE, repr(text))
+    assert info.value.message.startswith(f"holds {shown}; one --set sets one KEY=VALUE")
+    # Nothing of it reaches the spec either: loading refuses it before any key is set.
+    with pytest.raises(SpecError, match=r"^--set: "):
+        load_scenario("sim1", overrides=[text])
+
+
+def test_grid_and_vary_values_name_their_own_option():
+    from scenarios.campaign.variations import parse_variation
+    from scenarios.tuning.points import parse_grid
+
+    with pytest.raises(SpecError) as grid:
+        parse_grid("mapper.gate=0.1,0.2\nlaps=7")
+    assert (grid.value.file, grid.value.key) == ("--grid", repr("mapper.gate=0.2\nlaps=7"))
+    with pytest.raises(SpecError) as vary:
+        parse_variation("mapper.gate=uniform(0.1, 0.\n2)")
+    assert (vary.value.file, vary.value.key) == ("--vary", repr("mapper.gate=0.\n2"))
+
+
+def test_a_set_value_nested_too_deep_is_refused_before_parsing():
+    with pytest.raises(SpecError) as info:
+        parse_override("people=" + "[" * 100_000 + "]" * 100_000)
+    assert str(info.value) == ("--set: people: arrays and tables nest deeper than 64 levels "
+                               "(at line 1); no input needs more than a few")
+    assert parse_override("people=" + "[" * 64 + "]" * 64)[0] == ["people"]  # the limit holds
 
 
 # --- bad files and names -------------------------------------------------------------------

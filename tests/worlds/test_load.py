@@ -537,3 +537,47 @@ def test_spec_error_survives_pickling():
         error.message,
         str(error),
     )
+
+
+# --- names are printed: printable characters only; nesting is bounded ---------------------
+
+@pytest.mark.parametrize(
+    ("toml_name", "name", "bad"),
+    [
+        (r"\u001b[31mred", "\x1b[31mred", "\x1b"),  # a terminal colour sequence
+        (r"two\nlines", "two\nlines", "\n"),
+        (r"tab\there", "tab\there", "\t"),
+        (r"nul\u0000", "nul\x00", "\x00"),
+        (r"bidi\u202eevil", "bidi\u202eevil", "\u202e"),  # a format character (Cf)
+    ],
+    ids=["escape", "newline", "tab", "nul", "bidi-override"],
+)
+def test_world_name_with_an_unprintable_character_is_refused(tmp_path, toml_name, name, bad):
+    error = load_error(write(tmp_path, edited('name = "tiny"', f'name = "{toml_name}"')))
+    assert error.key == "name"
+    position = name.index(bad)
+    assert error.message == (f"{name!r} holds the unprintable character {bad!r} at position "
+                             f"{position}; use printable characters only")
+    assert bad not in str(error)  # shown escaped, never raw
+    # A world built in code gets the same check.
+    field = [(0.3, -0.3), (0.6, -0.3), (0.6, 0.3), (0.3, 0.3)]
+    path = PathSpec([(0, 0), (5, 0)], [SegmentSpec("a", 0, 1, field, field)])
+    with pytest.raises(SpecError) as in_code:
+        WorldSpec(name, walls=[], posts=[], boxes=[], people=[], path=path)
+    assert (in_code.value.file, in_code.value.key, in_code.value.message) == (
+        MEMORY, "name", error.message)
+
+
+def test_world_name_may_be_any_printable_text(tmp_path):
+    world = load_world(write(tmp_path, edited('name = "tiny"', 'name = "Halle Süd, Tor 2"')))
+    assert world.name == "Halle Süd, Tor 2"
+
+
+def test_a_world_nested_too_deep_is_refused_before_parsing(tmp_path):
+    depth = 100_000
+    text = GOOD + "deep = " + "[" * depth + "]" * depth + "\n"
+    error = load_error(write(tmp_path, text))
+    line = GOOD.count("\n") + 1  # the line after GOOD, where the nesting is
+    assert (error.key, error.message) == (
+        FILE_KEY, f"arrays and tables nest deeper than 64 levels (at line {line}); no input "
+        "needs more than a few")
