@@ -29,13 +29,18 @@ from pathlib import Path
 import numpy as np
 from matplotlib.image import imread
 
-from semistatic.colours import FIELD_COLOURS, RETURNS_COLOUR, WALL_COLOUR
+from semistatic.colours import FIELD_COLOURS, RETURNS_COLOUR
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 RERUN = Path(sys.executable).with_name("rerun")
 COLOURS = {"warning": FIELD_COLOURS["warning"], "protective": FIELD_COLOURS["protective"],
-           "returns": RETURNS_COLOUR, "walls": WALL_COLOUR}
-"""The drawing colours counted in a screenshot (8-bit, within a tolerance)."""
+           "returns": RETURNS_COLOUR}
+"""The drawing colours counted in a screenshot (8-bit, within a tolerance). Not the walls'
+dark grey: the viewer's own panels have it, drawn or not."""
+
+MIN_DRAWN = 100
+"""Protective-field and return pixels that say the scene is drawn: the viewer's own panels
+have none (its orange software-rendering notice passes for the warning field's colour)."""
 
 
 def missing() -> str | None:
@@ -101,8 +106,11 @@ def screenshot(url: str, out: Path, *, seconds: float = 60.0,
                size: tuple[int, int] = (1400, 850)) -> dict[str, int]:
     """Screenshot ``url`` into ``out`` once the drawing stops changing; return its counts.
 
-    Screenshots every 3 s until two in a row count the same drawing pixels with some
-    drawn, or ``seconds`` have passed (an empty viewer draws nothing: it waits it out).
+    Screenshots every 3 s until two in a row count the same drawing pixels with the scene
+    drawn (:data:`MIN_DRAWN`), or ``seconds`` have passed (an empty viewer draws nothing:
+    it waits them out).
+    Only the scene's colours count: the viewer's loading screen holds still for as long
+    as a slow machine takes to load it, and must not pass for the drawn scene.
     """
     from playwright.sync_api import sync_playwright
 
@@ -118,7 +126,7 @@ def screenshot(url: str, out: Path, *, seconds: float = 60.0,
                 time.sleep(3.0)
                 page.screenshot(path=str(out))
                 counts = colour_counts(out)
-                drawn = sum(counts.values())
+                drawn = counts["protective"] + counts["returns"] >= MIN_DRAWN
                 if (drawn and counts == last) or time.monotonic() > deadline:
                     return counts
                 last = counts
