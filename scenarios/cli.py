@@ -6,8 +6,10 @@ a command that runs them (:func:`semistatic.kernel_cache.warm_kernel_cache`), an
 errors into exit statuses: bad input (a missing or malformed file, an unknown key, an
 out-of-range value, an option out of range, an output directory that cannot be created)
 ends with status 2 and one line ``error: <file or option>: <key>: <what is wrong>``,
-before any work starts and before anything is written; a run whose lap cannot complete
-exits with 1; Ctrl-C exits with 130 and one line.
+before any work starts and before anything is written; a full disk or a refused
+permission while writing also ends with status 2 and one ``error:`` line (the previous
+result whole); a run whose lap cannot complete exits with 1; Ctrl-C exits with 130 and
+one line.
 """
 
 from __future__ import annotations
@@ -19,7 +21,13 @@ import sys
 from collections.abc import Sequence
 
 from scenarios.commands import campaign, compare, evaluate, falsify, replay, run, tune
-from scenarios.process.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, InputError, check_jobs
+from scenarios.process.errors import (
+    EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
+    InputError,
+    check_jobs,
+    write_failure,
+)
 from semistatic.errors import SpecError, caused_by_interrupt
 
 __all__ = ["console_main", "main"]
@@ -81,6 +89,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted; earlier results are left as they were", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as error:
+        # A full disk or a refused permission while writing (staging is removed on the
+        # way out of stage_and_publish); any other OSError is a fault to see whole.
+        line = write_failure(error)
+        if line is None:
+            raise
+        print("error: " + _one_line(line), file=sys.stderr)
+        return EXIT_BAD_INPUT
     except SystemError as error:
         # Ctrl-C while numba unpickles a cached kernel reaches us as a SystemError
         # ("returned a result with an exception set") caused by the KeyboardInterrupt.

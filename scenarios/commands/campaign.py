@@ -35,9 +35,10 @@ import json
 from pathlib import Path
 
 from scenarios.process.staging import (
-    RESULT_MARKER,
     check_resumable_dir,
+    read_result_marker,
     write_atomic,
+    write_result_marker,
 )
 from scenarios.spec.load import scenario_help
 from scenarios.tuning.run import BACKENDS, check_backend
@@ -202,7 +203,8 @@ def _run(args, out, resume, definition, scenarios, policies, seeds, variations,
     from scenarios.tuning.run import open_backend
 
     out.mkdir(parents=True, exist_ok=True)
-    (out / RESULT_MARKER).touch()
+    if read_result_marker(out) is None:  # a resumed campaign keeps its marker and id
+        write_result_marker(out, "campaign")
     runs = plan_campaign(scenarios, policies, seeds, variations, samples, laps=args.laps,
                          overrides=args.overrides, worlds_dir=out / "worlds")
     manifest = {

@@ -29,6 +29,7 @@ import numpy as np
 from scenarios.campaign.compare import compare_campaigns
 from scenarios.campaign.table import read_campaign
 from scenarios.campaign.tolerances import DEFAULT_TOLERANCES, default_tolerances, read_tolerances
+from scenarios.process.output_paths import check_output_paths
 from scenarios.process.staging import check_writable_parent, write_atomic
 from semistatic.errors import SpecError
 
@@ -98,9 +99,8 @@ of a finished `semistatic campaign`
                                                  ("--markdown", args.markdown)) if path}
     for option, path in targets.items():
         _check_target(path, option)
-    if len(targets) == 2 and args.junit.resolve() == args.markdown.resolve():
-        raise SpecError("--markdown", str(args.markdown), "is also the --junit file; name "
-                                                          "two files")
+    check_output_paths(targets, replaced=None,
+                       inputs={"BASELINE": args.baseline, "CANDIDATE": args.candidate})
     baseline = read_campaign(args.baseline, option="BASELINE")
     candidate = read_campaign(args.candidate, option="CANDIDATE")
     comparison = compare_campaigns(

@@ -27,6 +27,7 @@ import json
 from pathlib import Path
 
 from scenarios.logs.real_log import NOISE_SCANS, REPLAY_PARAMS, open_log
+from scenarios.process.output_paths import check_output_paths
 from scenarios.process.staging import check_output_dir, stage_and_publish
 from semistatic.errors import SpecError
 from semistatic.evaluation import EXTRACTORS, RayScore, at_vertex_count, tolerance_sweep
@@ -118,8 +119,9 @@ def main_evaluate(args: argparse.Namespace) -> int:
         raise SpecError(str(args.log), "<file>", "no such file or directory")
     name = args.log.name.split(".")[0]
     # Checked before the work, as every command does: a bad --out costs no scoring.
-    out = check_output_dir(
-        args.out if args.out is not None else Path("results") / f"evaluate-{name}")
+    out = args.out if args.out is not None else Path("results") / f"evaluate-{name}"
+    check_output_paths({"--out": out}, inputs={"LOG": args.log})
+    out = check_output_dir(out)
     try:
         scans = list(itertools.islice(open_log(args.log), 0, None, args.every))
     except ValueError as error:  # LogFormatError, BagError
@@ -164,7 +166,7 @@ def main_evaluate(args: argparse.Namespace) -> int:
              "published": _published(reference)}, indent=2))
         _plot(staging / "figures" / "rmse_vertices.png", name, table, reference)
 
-    stage_and_publish(out, fill)
+    stage_and_publish(out, fill, command="evaluate")
     print(f"results in {out}/ (evaluation.json, figures/rmse_vertices.png)")
     return 0
 

@@ -43,10 +43,12 @@ import json
 from pathlib import Path
 
 from scenarios.process.errors import InputError
+from scenarios.process.output_paths import check_output_paths, sqlite_path
 from scenarios.process.staging import (
-    RESULT_MARKER,
     check_resumable_dir,
+    read_result_marker,
     write_atomic,
+    write_result_marker,
 )
 from scenarios.spec.load import scenario_help
 from scenarios.tuning.run import BACKENDS, check_backend
@@ -196,6 +198,8 @@ def main_falsify(args: argparse.Namespace) -> int:
     out = args.out
     if out is None:
         out = Path("results") / f"falsify-{Path(args.scenario).stem}"
+    check_output_paths({"--out": out, "--storage": sqlite_path(args.storage)}, replaced=None,
+                       storages=["--storage"])
     name, configs = _configs(args, out)
     definition = {"version": importlib.metadata.version("semistatic"),
                   "searches": [config.fingerprint() for config in configs]}
@@ -209,7 +213,8 @@ def main_falsify(args: argparse.Namespace) -> int:
     from scenarios.tuning.warm import WarmStarts
 
     out.mkdir(parents=True, exist_ok=True)
-    (out / RESULT_MARKER).touch()
+    if read_result_marker(out) is None:  # a resumed falsify keeps its marker and id
+        write_result_marker(out, "falsify")
     command = ["semistatic", *getattr(args, "argv", ["falsify"])]
     if not resume:
         write_atomic(out / MANIFEST_FILE, json.dumps(

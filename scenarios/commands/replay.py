@@ -17,6 +17,7 @@ from pathlib import Path
 
 from scenarios.logs.rrd_options import DEFAULT_VIEWER_URL, open_timeline
 from scenarios.process.errors import InputError
+from scenarios.process.output_paths import check_output_paths
 from scenarios.process.progress import scan_progress
 from scenarios.process.staging import check_output_dir
 from semistatic.errors import SpecError
@@ -90,7 +91,10 @@ def main_replay(args: argparse.Namespace) -> int:
     if not args.log.exists():
         raise InputError(f"{args.log}: <file>: no such file or directory")
     name = args.log.name.split(".")[0]
-    out = check_output_dir(args.out if args.out is not None else Path("results") / f"replay-{name}")
+    out = args.out if args.out is not None else Path("results") / f"replay-{name}"
+    check_output_paths({"--out": out, "--rrd": args.rrd}, into_result=["--rrd"],
+                       inputs={"LOG": args.log})
+    out = check_output_dir(out)
     timeline = open_timeline(args.rrd, args.viewer, out, f"replay-{name}")
     try:
         with scan_progress(f"replay {name}") as advance:

@@ -30,6 +30,7 @@ from scenarios.process.errors import (
     check_display,
     check_jobs,
 )
+from scenarios.process.output_paths import check_output_paths
 from scenarios.process.progress import count_progress, sim_progress
 from scenarios.process.staging import check_output_dir, stage_and_publish
 from scenarios.spec.load import scenario_help
@@ -140,6 +141,11 @@ def _load(scenario: str, overrides: Sequence[str], laps: int | None = None,
     return spec, scenario_world(spec)
 
 
+def _inputs(spec, world) -> dict[str, str]:
+    """Return the files a run reads (a result replacing them would delete them)."""
+    return {"scenario file": spec.source, "world file": getattr(world, "source", None)}
+
+
 def _other_policies(spec) -> list[str]:
     """Return the bundled field policies other than the scenario's, in their order.
 
@@ -166,6 +172,7 @@ def main_check(args: argparse.Namespace) -> int:
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     if args.out is not None:
+        check_output_paths({"--out": args.out}, inputs=_inputs(spec, world))
         check_output_dir(args.out)
     boxes = [len(lap.boxes) for lap in lap_worlds(spec)]
     length = build_spline(world.path).length
@@ -219,7 +226,12 @@ def main_run(args: argparse.Namespace) -> int:
     from scenarios.spec.layout import estimated_sim_time
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
-    out = check_output_dir(args.out if args.out is not None else Path("results") / spec.name)
+    out = args.out if args.out is not None else Path("results") / spec.name
+    # The bag and the Rerun recording may go into the new result (written after it).
+    check_output_paths({"--out": out, "--bag": args.bag, "--record": args.record,
+                        "--rrd": args.rrd}, into_result=["--bag", "--rrd"],
+                       inputs=_inputs(spec, world))
+    out = check_output_dir(out)
     check_display(args.gui)
     recorder = None
     if args.bag is not None:
@@ -379,6 +391,7 @@ def main_table(args: argparse.Namespace) -> int:
     check_jobs(args.jobs)
     for name in names:
         _load(name, [], args.laps)  # fail fast on bad input, before any run
+    check_output_paths({"--out": args.out})
     out = check_output_dir(args.out)
     results: dict[str, dict] = {}
 
@@ -398,7 +411,7 @@ def main_table(args: argparse.Namespace) -> int:
                         advance(name)
         write_table({name: results[name] for name in names}, staging)
 
-    stage_and_publish(out, fill)
+    stage_and_publish(out, fill, command="table")
     ordered = {name: results[name] for name in names}
     print(render_table(ordered))
     print(f"results in {out}/ (table1.csv, table1.md, one folder per scenario)")

@@ -36,6 +36,7 @@ import argparse
 from pathlib import Path
 
 from scenarios.process.errors import check_jobs
+from scenarios.process.output_paths import check_output_paths
 from scenarios.process.progress import count_progress
 from scenarios.process.staging import check_output_dir
 from scenarios.spec.load import scenario_help
@@ -173,6 +174,7 @@ def main_tune(args: argparse.Namespace) -> int:
         for point in points:  # refuse what a replay cannot honour before any work
             recordings.for_spec(point.spec)
     out = args.out if args.out is not None else Path("results") / f"tune-{points[0].spec.name}"
+    check_output_paths({"--out": out}, inputs={"--recording": args.recordings})
     check_output_dir(out)
     with count_progress(len(points), f"tune {points[0].spec.name}", "run") as advance:
         results = run_sweep(points, jobs=args.jobs, recordings=recordings,

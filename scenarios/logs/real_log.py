@@ -432,6 +432,6 @@ def write_replay_outputs(result: ReplayResult, out: str | Path, *, log_name: str
                             staging / "figures" / "replay_map.png",
                             title=f"{log_name}: polyline map over the raw laser points")
 
-    stage_and_publish(Path(out), fill)
+    stage_and_publish(Path(out), fill, command="replay")
     return metrics
 

@@ -3,7 +3,9 @@
 Bad input ends a command with exit status 2 and one line ``error: <file or option>:
 <key>: <what is wrong>`` before any work starts (:class:`~semistatic.errors.SpecError`
 for files and keys, :class:`InputError` for everything else); a run whose lap cannot
-complete exits with 1; an interruption with 130.
+complete exits with 1; an interruption with 130. A full disk or a permission refused
+while a command writes (:func:`write_failure`) also ends with 2 and one line: the user
+frees space or fixes the permissions; the previous result is left whole.
 
 Examples
 --------
@@ -16,6 +18,7 @@ semistatic.errors.SpecError: --jobs: jobs: must be >= 1 and <= ..., got 0 (4 per
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 
@@ -27,11 +30,13 @@ __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_RUN_FAILED",
     "JOBS_PER_CPU",
+    "WRITE_ERRNOS",
     "InputError",
     "check_display",
     "check_jobs",
     "max_jobs",
     "usable_cpus",
+    "write_failure",
 ]
 
 EXIT_BAD_INPUT = 2
@@ -40,6 +45,11 @@ EXIT_INTERRUPTED = 130
 
 JOBS_PER_CPU = 4
 """More worker processes per CPU than this is a typo, not a machine (see :func:`max_jobs`)."""
+
+
+_DISK_FULL = frozenset({errno.ENOSPC, errno.EDQUOT})
+WRITE_ERRNOS = _DISK_FULL | {errno.EACCES, errno.EPERM, errno.EROFS}
+"""``OSError`` numbers a user fixes outside the program: space, quota, permissions."""
 
 
 class InputError(Exception):
@@ -107,3 +117,29 @@ def check_display(gui: bool) -> None:
     ):
         raise SpecError("--gui", "DISPLAY", "no display to open the PyBullet GUI on (DISPLAY "
                         "is not set); run without --gui or set DISPLAY")
+
+
+def write_failure(error: OSError) -> str | None:
+    """Return the ``error:`` line for a full disk or a refused permission, else ``None``.
+
+    Other ``OSError``s are bugs or faults to see whole (``None``: the caller re-raises).
+
+    Examples
+    --------
+    >>> write_failure(OSError(errno.ENOSPC, "No space left on device", "/r/out/metrics.json"))
+    '/r/out/metrics.json: No space left on device; free some space (or choose an --out on \
+another disk) and run again; earlier results are left as they were'
+    >>> write_failure(OSError(errno.EROFS, "Read-only file system", "/r"))
+    '/r: Read-only file system; choose a path you may write (or fix its permissions); \
+earlier results are left as they were'
+    >>> write_failure(OSError(errno.EIO, "Input/output error")) is None
+    True
+    """
+    if error.errno not in WRITE_ERRNOS:
+        return None
+    where = error.filename if error.filename is not None else "output"
+    reason = error.strerror or os.strerror(error.errno)
+    fix = ("free some space (or choose an --out on another disk) and run again"
+           if error.errno in _DISK_FULL
+           else "choose a path you may write (or fix its permissions)")
+    return f"{where}: {reason}; {fix}; earlier results are left as they were"

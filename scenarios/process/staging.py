@@ -7,19 +7,25 @@ result is replaced as a whole, never mixed with a new one, and a run that fails 
 interrupted leaves it untouched. Staging directories left by killed runs (their process
 is gone) are removed by the next check of the same directory.
 
-A directory is a semistatic result when it holds ``RESULT_MARKER`` (or, written before
-the marker existed, one of ``LEGACY_RESULT_FILES``); a non-empty directory that is not
-is never replaced.
+A directory is a semistatic result only when its ``RESULT_MARKER`` file is the small JSON
+document our commands write (:func:`write_result_marker`: the command and a random id);
+a file of that name with any other content, or result-like files such as a
+``metrics.json``, do not make a directory ours, and a non-empty directory that is not
+ours is never replaced.
 
 Examples
 --------
 >>> import tempfile
 >>> folder = Path(tempfile.mkdtemp())
 >>> out = check_output_dir(folder / "run")
->>> stage_and_publish(out, lambda staging: (staging / "a.txt").write_text("1"))
->>> stage_and_publish(out, lambda staging: (staging / "b.txt").write_text("2"))
+>>> stage_and_publish(out, lambda staging: (staging / "a.txt").write_text("1"),
+...                   command="run")
+>>> stage_and_publish(out, lambda staging: (staging / "b.txt").write_text("2"),
+...                   command="run")
 >>> sorted(path.name for path in out.iterdir())
 ['.semistatic-result', 'b.txt']
+>>> read_result_marker(out)["command"]
+'run'
 >>> check_output_dir(folder / "run" / "b.txt" / "deeper")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
@@ -33,7 +39,9 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 
@@ -41,22 +49,28 @@ from semistatic.errors import SpecError
 from semistatic.validation import loads_json
 
 __all__ = [
-    "LEGACY_RESULT_FILES",
+    "MARKER_FORMAT",
     "RESULT_MARKER",
     "check_output_dir",
     "check_resumable_dir",
     "check_writable_parent",
     "is_result_dir",
+    "read_result_marker",
     "remove_stale_staging",
     "stage_and_publish",
     "write_atomic",
+    "write_result_marker",
 ]
 
 RESULT_MARKER = ".semistatic-result"
 """File that marks a directory as written by semistatic (so it may be replaced)."""
 
-LEGACY_RESULT_FILES = ("metrics.json", "sweep.json", "table1.md")
-"""Files that mark a result written before ``RESULT_MARKER`` existed."""
+MARKER_FORMAT = 1
+"""Version of the marker document (its ``"semistatic"`` key)."""
+
+_MARKER_BYTES = 4096  # a real marker is ~90 bytes; a larger file is not one of ours
+_MARKER_ID = re.compile(r"[0-9a-f]{32}")
+_MARKER_COMMAND = re.compile(r"[a-z][a-z-]{0,31}")
 
 FILE_MODE = 0o644
 """File mode of a file written by :func:`write_atomic`: readable by all, as ``open`` makes it."""
@@ -64,17 +78,83 @@ FILE_MODE = 0o644
 _LEFTOVER = re.compile(r"\.(?P<name>.+)\.(?P<kind>staging|previous)-(?P<pid>\d+)-[^.]+$")
 
 
+def write_result_marker(directory: Path, command: str) -> dict:
+    """Mark ``directory`` as a result of ``command``; return the marker document written.
+
+    The marker is ``{"semistatic": 1, "command": COMMAND, "id": RANDOM_HEX}``: a random
+    id (``uuid4``) that no user file carries by chance. Written atomically, so a killed
+    command leaves the old marker or the new one.
+
+    Examples
+    --------
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> sorted(write_result_marker(folder, "tune"))
+    ['command', 'id', 'semistatic']
+    >>> read_result_marker(folder) == json.loads((folder / RESULT_MARKER).read_text())
+    True
+    >>> shutil.rmtree(folder)
+    """
+    if _MARKER_COMMAND.fullmatch(command) is None:
+        raise ValueError(f"write_result_marker: {command!r} is not a command name")
+    marker = {"semistatic": MARKER_FORMAT, "command": command, "id": uuid.uuid4().hex}
+    write_atomic(directory / RESULT_MARKER, json.dumps(marker) + "\n")
+    return marker
+
+
+def read_result_marker(directory: Path) -> dict | None:
+    """Return the marker document of ``directory``, or ``None`` when it carries none.
+
+    Only a regular file of at most a few kB whose JSON is exactly the document
+    :func:`write_result_marker` writes counts: an empty file, other text, a FIFO or a
+    symlink named like the marker do not.
+
+    Examples
+    --------
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> _ = (folder / RESULT_MARKER).write_text("written by me")
+    >>> read_result_marker(folder) is None
+    True
+    >>> read_result_marker(folder / "missing") is None
+    True
+    >>> shutil.rmtree(folder)
+    """
+    marker_file = directory / RESULT_MARKER
+    try:
+        # lstat, not stat: a symlink named like the marker could point at anything.
+        info = marker_file.lstat()
+        if not stat.S_ISREG(info.st_mode) or info.st_size > _MARKER_BYTES:
+            return None
+        found = json.loads(marker_file.read_bytes())
+    except (OSError, ValueError, RecursionError):
+        return None
+    if (not isinstance(found, dict) or set(found) != {"semistatic", "command", "id"}
+            or found["semistatic"] != MARKER_FORMAT or isinstance(found["semistatic"], bool)
+            or not isinstance(found["command"], str)
+            or _MARKER_COMMAND.fullmatch(found["command"]) is None
+            or not isinstance(found["id"], str) or _MARKER_ID.fullmatch(found["id"]) is None):
+        return None
+    return found
+
+
 def is_result_dir(path: Path) -> bool:
     """Return whether ``path`` is a directory semistatic wrote (or an empty one).
 
     Examples
     --------
-    >>> is_result_dir(Path(tempfile.mkdtemp()))
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> is_result_dir(folder)
     True
+    >>> _ = (folder / "metrics.json").write_text("{}")
+    >>> is_result_dir(folder)
+    False
+    >>> _ = write_result_marker(folder, "run")
+    >>> is_result_dir(folder)
+    True
+    >>> shutil.rmtree(folder)
     """
     if not path.is_dir():
         return False
-    if (path / RESULT_MARKER).exists() or any((path / n).exists() for n in LEGACY_RESULT_FILES):
+    if read_result_marker(path) is not None:
         return True
     return not any(path.iterdir())
 
@@ -156,11 +236,13 @@ def check_output_dir(out: str | os.PathLike[str], *, option: str = "--out") -> P
     return out
 
 
-def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
+def stage_and_publish(out: Path, fill: Callable[[Path], None], *, command: str) -> None:
     """Let ``fill`` write into a staging directory, then make it ``out`` as a whole.
 
-    If ``fill`` raises (or the process is interrupted), ``out`` is untouched; otherwise
-    an earlier result in ``out`` is replaced entirely, nothing of it is kept.
+    If ``fill`` raises (a full disk included) or the process is interrupted, ``out`` is
+    untouched and the staging directory removed; otherwise an earlier result in ``out``
+    is replaced entirely, nothing of it is kept, and the new one is marked as written by
+    ``command`` (:func:`write_result_marker`).
     """
     out = check_output_dir(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -168,12 +250,16 @@ def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
                                     dir=out.parent))
     try:
         fill(staging)
-        (staging / RESULT_MARKER).write_text("written by semistatic; replaced as a whole\n")
+        write_result_marker(staging, command)
         if out.exists():
             previous = Path(tempfile.mkdtemp(prefix=f".{out.name}.previous-{os.getpid()}-",
                                              dir=out.parent))
             os.replace(out, previous)
-            os.rename(staging, out)
+            try:
+                os.rename(staging, out)
+            except BaseException:
+                os.rename(previous, out)  # the old result back in place, whole
+                raise
             shutil.rmtree(previous, ignore_errors=True)
         else:
             os.rename(staging, out)
@@ -211,7 +297,8 @@ def check_resumable_dir(out: Path, *, manifest: str, kind: str, definition: dict
     """Return whether ``out`` holds the same resumable result to go on with; raise if unusable.
 
     A command whose directory fills as it works (a campaign, a falsification search)
-    writes ``manifest`` with its ``kind`` and ``definition``: the same command resumes it;
+    marks it (:func:`write_result_marker`) and writes ``manifest`` with its ``kind`` and
+    ``definition``: the same command resumes it (a manifest without a marker is not ours);
     another ``noun`` (other definition values), another result or files of the user's are
     refused, and a new or empty directory must be creatable.
 
@@ -233,7 +320,8 @@ directory
     manifest_file = out / manifest
     if out.exists() and not out.is_dir():
         raise SpecError("--out", str(out), "exists and is not a directory; choose a directory")
-    if out.is_dir() and manifest_file.is_file():
+    ours = out.is_dir() and read_result_marker(out) is not None
+    if ours and manifest_file.is_file():
         try:
             found = loads_json(manifest_file.read_text(), file="--out", key=str(manifest_file))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError, SpecError):
@@ -247,8 +335,9 @@ directory
             raise SpecError("--out", str(out), f"holds another {noun} (its {', '.join(differs)}"
                             " differ); choose another --out, or delete it to start again")
         return True
-    if out.is_dir() and any(out.iterdir()):
-        what = "a result of another command" if is_result_dir(out) else "files of yours"
+    # Only our marker (a command killed before its manifest was written): start afresh.
+    if out.is_dir() and any(path.name != RESULT_MARKER or not ours for path in out.iterdir()):
+        what = "a result of another command" if ours else "files of yours"
         raise SpecError("--out", str(out), f"holds {what}; choose a new or empty directory")
     check_writable_parent(out / RESULT_MARKER if out.exists() else out, option="--out")
     return False

@@ -364,5 +364,5 @@ def write_outputs(
                     title=f"{heading}\nlap times per vehicle, sharing on and off (same seed)",
                 )
 
-    stage_and_publish(Path(out_dir), fill)
+    stage_and_publish(Path(out_dir), fill, command="run")
     return metrics

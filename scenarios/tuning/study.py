@@ -18,8 +18,9 @@ import argparse
 import sqlite3
 from pathlib import Path
 
+from scenarios.process.output_paths import check_output_paths, sqlite_path
 from scenarios.process.progress import count_progress
-from scenarios.process.staging import RESULT_MARKER, check_output_dir
+from scenarios.process.staging import check_output_dir, read_result_marker, write_result_marker
 from scenarios.results.outputs import json_text
 from scenarios.tuning.params import grid_size, parse_params
 from scenarios.tuning.points import GRID_OPTION, parse_seeds
@@ -94,11 +95,19 @@ def main_search(args: argparse.Namespace) -> int:
     name = args.study or "tune-" + "+".join(
         dict.fromkeys(point.spec.name for point in config.points({})))
     out = args.out if args.out is not None else Path("results") / name
+    own_storage = out / STUDY_FILE  # carried over into the results when they replace out
+    check_output_paths({"--out": out, "--storage": sqlite_path(args.storage)},
+                       storages=["--storage"], managed=[own_storage],
+                       inputs={"--recording": args.recordings})
     check_output_dir(out)
-    url = args.storage
+    given = sqlite_path(args.storage)
+    keep_study = args.storage is None or (given is not None
+                                          and given.resolve() == own_storage.resolve())
+    url = None if keep_study else args.storage
     if url is None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / RESULT_MARKER).touch()  # the study inside makes it a result being written
+        if read_result_marker(out) is None:  # the study inside makes it a result being written
+            write_result_marker(out, "tune")
         url = default_storage(out)
     study, storage = open_study(config, url, name)
     remaining = max(0, config.trials - len(finished_trials(study)))
@@ -111,8 +120,8 @@ def main_search(args: argparse.Namespace) -> int:
     def extra(summary: dict, staging: Path) -> None:
         summary["study"] = {"name": name, "storage": url, **report}
         (staging / "study.json").write_text(json_text(summary["study"]))
-        if args.storage is None:  # keep the study with the results (optuna-dashboard)
-            with sqlite3.connect(out / STUDY_FILE) as source, \
+        if keep_study:  # keep the study with the results (optuna-dashboard)
+            with sqlite3.connect(own_storage) as source, \
                     sqlite3.connect(staging / STUDY_FILE) as copy:
                 source.backup(copy)
         if not args.no_figures:

@@ -225,7 +225,7 @@ def write_sweep(
         (staging / "sweep.csv").write_text(csv_text(rows))
         (staging / "sweep.json").write_text(json_text(summary))
 
-    stage_and_publish(Path(out), fill)
+    stage_and_publish(Path(out), fill, command="tune")
     return summary
 
 

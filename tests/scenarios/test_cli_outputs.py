@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from scenarios.process.staging import RESULT_MARKER
+from scenarios.process.staging import read_result_marker
 from tests.scenarios.cli_helpers import run_cli
 from tests.scenarios.tiny_world import TINY_SCENARIO, write_tiny
 
@@ -32,7 +32,7 @@ def test_a_reused_output_directory_holds_only_the_newest_run(capsys, tmp_path):
     assert json.loads((out / "metrics.json").read_text())["laps"] == 1
     assert sorted(path.name for path in (out / "maps").iterdir()) == ["lap_01.geojson"]
     assert not (out / "figures").exists()
-    assert (out / RESULT_MARKER).exists()
+    assert read_result_marker(out)["command"] == "run"
     assert "Table 1 needs at least 2 laps" in stdout
     assert "None" not in stdout
     assert [path.name for path in tmp_path.iterdir() if path.name.startswith(".")] == []

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.process.staging import RESULT_MARKER
+from scenarios.process.staging import write_result_marker
 from tests.scenarios.tiny_world import write_tiny
 
 pytestmark = pytest.mark.slow
@@ -89,7 +89,7 @@ def _corridor_log(path: Path, passes: int) -> Path:
 def _previous_result(out: Path) -> str:
     """Make ``out`` an earlier good result; return the text that must survive."""
     out.mkdir()
-    (out / RESULT_MARKER).write_text("earlier run\n")
+    write_result_marker(out, "run")
     text = json.dumps({"earlier": "good result"})
     (out / "metrics.json").write_text(text)
     return text

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import optuna
 import pytest
 
+from scenarios.process.staging import write_result_marker
 from scenarios.spec.load import load_scenario
 from scenarios.tuning.metrics import TIMING_COLUMNS
 from scenarios.tuning.params import parse_param, parse_params
@@ -102,11 +103,13 @@ def test_bad_search_input_exits_2_with_one_line_and_keeps_the_results(
 ):
     out = tmp_path / "out"
     out.mkdir()
+    write_result_marker(out, "tune")  # an earlier result
     (out / "sweep.json").write_text("{}")
+    before = {path.name: path.read_bytes() for path in out.iterdir()}
     status, _, err = run_cli(capsys, "tune", tiny, *SEARCH, *options, "--out", out)
     assert status == 2
     assert_one_error_line(err, *fragments)
-    assert sorted(path.name for path in out.iterdir()) == ["sweep.json"]
+    assert {path.name: path.read_bytes() for path in out.iterdir()} == before
 
 
 def _finished(database):
