@@ -155,8 +155,8 @@ def _check_pair(option: str, other: str, given: dict[str, Path], spelled: dict[s
     if first == second:
         what = (", which is replaced as a whole; choose a path outside it"
                 if replaced in (option, other) else "; give each its own path")
-        later = other if option == replaced else option
-        earlier = option if later == other else other
+        later = option if other == replaced else other  # named: the one to change
+        earlier = other if later == option else option
         raise SpecError(later, spelled[later], f"is {earlier} {spelled[earlier]}{what}")
     for inner, outer in ((option, other), (other, option)):
         if not _inside(given[inner], given[outer]):

@@ -45,6 +45,7 @@ import uuid
 from collections.abc import Callable
 from pathlib import Path
 
+from scenarios.process.errors import WRITE_ERRNOS
 from semistatic.errors import SpecError
 from semistatic.validation import loads_json
 
@@ -232,7 +233,7 @@ def check_output_dir(out: str | os.PathLike[str], *, option: str = "--out") -> P
             "empty directory (results replace the directory as a whole)",
         )
     check_writable_parent(out / RESULT_MARKER if out.exists() else out, option=option)
-    remove_stale_staging(out)
+    remove_stale_staging(out.resolve())
     return out
 
 
@@ -244,13 +245,20 @@ def stage_and_publish(out: Path, fill: Callable[[Path], None], *, command: str) 
     is replaced entirely, nothing of it is kept, and the new one is marked as written by
     ``command`` (:func:`write_result_marker`).
     """
-    out = check_output_dir(out)
+    # Published where ``out`` really is: a symlink to a result keeps pointing at the new one.
+    out = check_output_dir(out).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-{os.getpid()}-",
                                     dir=out.parent))
     try:
-        fill(staging)
-        write_result_marker(staging, command)
+        try:
+            fill(staging)
+            write_result_marker(staging, command)
+        except OSError as error:
+            if error.filename is not None or error.errno not in WRITE_ERRNOS:
+                raise
+            # A write through an open file names no path: name the result being written.
+            raise OSError(error.errno, error.strerror, str(out)) from error
         if out.exists():
             previous = Path(tempfile.mkdtemp(prefix=f".{out.name}.previous-{os.getpid()}-",
                                              dir=out.parent))
