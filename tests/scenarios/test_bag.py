@@ -213,7 +213,8 @@ def test_cli_storage_choices_match_the_writer():
     [
         ("existing", ["existing", "--bag", "exists already", "choose a new directory"]),
         ("no/parent/bag", ["no/parent/bag", "--bag", "parent directory", "does not exist"]),
-        ("out", ["out", "--bag", "is the --out directory"]),
+        # Every command's overlap check (scenarios.process.output_paths) answers first.
+        ("out", ["out", "--bag", "is --out", "replaced as a whole"]),
     ],
 )
 def test_bad_bag_path_exits_2_before_the_run(capsys, tmp_path, bag_name, fragments):

@@ -12,6 +12,7 @@ from scenarios.campaign.journal import read_journal
 from scenarios.campaign.plan import check_campaign, plan_campaign
 from scenarios.campaign.table import flatten_metrics, read_campaign
 from scenarios.campaign.variations import draw_samples, parse_variation, parse_variations
+from scenarios.process.staging import write_result_marker
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, kill_after_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
@@ -134,6 +135,11 @@ def test_another_campaign_in_the_out_directory_is_refused(tiny, tmp_path, capsys
     out.mkdir()
     (out / "manifest.json").write_text(json.dumps({"kind": "semistatic-campaign",
                                                    "definition": {"seeds": [7]}}))
+    # A manifest without our marker is a file of the user's, however it reads.
+    status, _, err = run_cli(capsys, "campaign", tiny, "--seeds", "0:1", "--out", out)
+    assert status == 2
+    assert_one_error_line(err, "holds files of yours")
+    write_result_marker(out, "campaign")
     status, _, err = run_cli(capsys, "campaign", tiny, "--seeds", "0:1", "--out", out)
     assert status == 2
     assert_one_error_line(err, "holds another campaign")

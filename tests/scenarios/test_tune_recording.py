@@ -170,7 +170,9 @@ def test_read_recording_refuses_a_directory_without_manifest(tmp_path):
 
 
 def test_run_record_refuses_an_existing_directory(tmp_path, capsys):
-    status, _, err = run_cli(capsys, "run", "pal1", "--laps", "1", "--record", tmp_path,
+    existing = tmp_path / "recording"
+    existing.mkdir()
+    status, _, err = run_cli(capsys, "run", "pal1", "--laps", "1", "--record", existing,
                              "--out", tmp_path / "out")
     assert status == 2
     assert_one_error_line(err, "--record:", "exists already")
