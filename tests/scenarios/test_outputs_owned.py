@@ -328,3 +328,20 @@ def test_a_real_full_disk_during_a_run_is_one_line_and_the_previous_result_stays
         assert _snapshot(disk) == before  # the previous result whole, no staging left
     finally:
         subprocess.run(["umount", str(disk)], check=False)
+
+
+def test_a_swap_that_fails_halfway_puts_the_previous_result_back(tmp_path, monkeypatch):
+    out = _previous_result(tmp_path / "out")
+    before = _snapshot(tmp_path)
+    rename = os.rename
+
+    def full_at_the_swap(source, target):
+        if ".staging-" in Path(source).name:  # the new result into place: the disk says no
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(target))
+        rename(source, target)
+
+    monkeypatch.setattr(os, "rename", full_at_the_swap)
+    with pytest.raises(OSError, match="No space left"):
+        stage_and_publish(out, lambda staging: (staging / "new.txt").write_text("new"),
+                          command="run")
+    assert _snapshot(tmp_path) == before
