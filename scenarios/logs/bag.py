@@ -216,8 +216,10 @@ def check_new_bag_path(path: str | os.PathLike[str], *, out: Path | None = None)
     """Return ``path`` if a run bag can be created there, else raise ``ValueError``.
 
     Called before a run starts, so that a bad ``--bag`` costs nothing. The bag directory
-    must not exist, its parent must (or be ``out``, the run's output directory, which
-    is written first), and it must neither be ``out`` nor contain it.
+    must not exist and its parent must, unless it lies directly in ``out``, the run's
+    output directory (written first, replacing a previous result and its bag whole). That
+    it neither is ``out`` nor holds it is every command's overlap check
+    (:func:`scenarios.process.output_paths.check_output_paths`).
 
     Examples
     --------
@@ -232,19 +234,12 @@ def check_new_bag_path(path: str | os.PathLike[str], *, out: Path | None = None)
     >>> folder.rmdir()
     """
     path = Path(path)
+    if out is not None and path.resolve().parent == out.resolve():
+        return path  # lands in the new result, which replaces the old one (and its bag) whole
     if path.exists():
         raise ValueError(
             f"{path}: --bag: exists already; choose a new directory name or remove the old bag"
         )
-    if out is not None:
-        bag, results = path.resolve(), out.resolve()
-        if bag == results or bag in results.parents:
-            raise ValueError(
-                f"{path}: --bag: is the --out directory or contains it ({out}); "
-                "give the bag its own directory, e.g. --bag OUT/bag"
-            )
-        if bag.parent == results:
-            return path
     if not path.parent.is_dir():
         raise ValueError(
             f"{path}: --bag: the parent directory {path.parent} does not exist; create it "

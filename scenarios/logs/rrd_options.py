@@ -69,8 +69,7 @@ def check_new_rrd_path(path: str | os.PathLike[str], *, option: str = "--rrd",
         raise ValueError(f"{path}: {option}: a Rerun recording's name ends in .rrd; "
                          f"e.g. {option} run.rrd")
     parent = path.resolve().parent
-    if out is not None and path.resolve() == out.resolve():
-        raise ValueError(f"{path}: {option}: is the --out directory; e.g. {option} OUT/run.rrd")
+    # That it is not ``out`` itself is every command's overlap check (check_output_paths).
     if out is not None and parent == out.resolve():
         return path  # lands in the new result, which replaces the old one whole
     if path.exists() or path.is_symlink():

@@ -16,8 +16,10 @@ from scenarios.logs.bag import (
     check_new_bag_path,
     write_run_bag,
 )
+from scenarios.process.output_paths import check_output_paths
 from scenarios.results.outputs import summarize
 from scenarios.spec.load import load_scenario
+from semistatic.errors import SpecError
 from semistatic.frames import compose, inverse
 from semistatic.local_map import LocalMap
 from semistatic.logs.rosbag import EKF_TOPIC, MARKER_TOPIC, read_bag
@@ -233,7 +235,8 @@ def test_bad_bag_path_exits_2_before_the_run(capsys, tmp_path, bag_name, fragmen
 def test_bag_may_go_inside_the_output_directory_not_around_it(tmp_path):
     out = tmp_path / "results"
     assert check_new_bag_path(out / "bag", out=out) == out / "bag"  # out is written first
-    with pytest.raises(ValueError, match="contains it"):
-        check_new_bag_path(tmp_path / "outer", out=tmp_path / "outer" / "results")
+    with pytest.raises(SpecError, match=r"--out: .*: is inside --bag"):
+        check_output_paths({"--out": tmp_path / "outer" / "results",
+                            "--bag": tmp_path / "outer"}, into_result=["--bag"])
     with pytest.raises(ValueError, match="does not exist"):
         check_new_bag_path(out / "deeper" / "bag", out=out)

@@ -345,3 +345,13 @@ def test_a_swap_that_fails_halfway_puts_the_previous_result_back(tmp_path, monke
         stage_and_publish(out, lambda staging: (staging / "new.txt").write_text("new"),
                           command="run")
     assert _snapshot(tmp_path) == before
+
+
+def test_a_bag_in_the_previous_result_does_not_block_the_next_run(tmp_path):
+    from scenarios.logs.bag import check_new_bag_path
+
+    out = _previous_result(tmp_path / "out")
+    (out / "bag").mkdir()  # the previous run's bag: replaced with the result
+    assert check_new_bag_path(out / "bag", out=out) == out / "bag"
+    with pytest.raises(ValueError, match="exists already"):
+        check_new_bag_path(out / "bag")
