@@ -383,7 +383,7 @@ walk and remission can change
         sx, sy, sz = box.size
         x, y, yaw = box.pose
         footprint = 0.5 * np.array([[sx, -sy], [sx, sy], [-sx, sy], [-sx, -sy]])
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_BOX,
             halfExtents=[0.5 * sx, 0.5 * sy, 0.5 * sz],
             visualFramePosition=[0.0, 0.0, 0.5 * sz],
@@ -433,9 +433,9 @@ walk and remission can change
         bullet = self._bullet
         body = bullet.createMultiBody(
             baseMass=0.0,
-            baseCollisionShapeIndex=bullet.createCollisionShape(bullet.GEOM_PLANE),
+            baseCollisionShapeIndex=self.sim.collision_shape(bullet.GEOM_PLANE),
             # a thin slab as the floor's look: pybullet has no visual for GEOM_PLANE
-            baseVisualShapeIndex=bullet.createVisualShape(
+            baseVisualShapeIndex=self.sim.visual_shape(
                 bullet.GEOM_BOX,
                 halfExtents=[_FLOOR_VISUAL_HALF_SIZE, _FLOOR_VISUAL_HALF_SIZE, 0.005],
                 visualFramePosition=[0.0, 0.0, -0.005],
@@ -481,7 +481,9 @@ walk and remission can change
     ) -> int:
         """Create a static body of the triangle mesh, its frame at ``pose`` on the floor."""
         bullet = self._bullet
-        shape = bullet.createCollisionShape(
+        # Made once per server and shared (SimClient.collision_shape): PyBullet never
+        # frees a mesh, and a world rebuilt at each reset would grow by its meshes.
+        shape = self.sim.collision_shape(
             bullet.GEOM_MESH, vertices=vertices.tolist(), indices=indices.tolist()
         )
         x, y, yaw = pose
@@ -501,7 +503,7 @@ walk and remission can change
         footprint = np.array(
             [[half_x, -half_y], [half_x, half_y], [-half_x, half_y], [-half_x, -half_y]]
         )
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_BOX,
             halfExtents=[half_x, half_y, 0.5 * wall.height],
             visualFramePosition=[0.0, 0.0, 0.5 * wall.height],
@@ -513,7 +515,7 @@ walk and remission can change
     def _add_cylinder(
         self, info: BodyInfo, x: float, y: float, radius: float, height: float
     ) -> int:
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_CYLINDER,
             radius=radius,
             length=height,
@@ -540,7 +542,7 @@ walk and remission can change
             return self._add_cylinder(info, x, y, 0.5 * piece.diameter, piece.length)
         radius = 0.5 * piece.diameter
         vertices, indices = lying_cylinder_mesh(piece.diameter, piece.length)
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_CYLINDER,
             radius=radius,
             length=piece.length,
