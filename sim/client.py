@@ -38,9 +38,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from types import TracebackType
 
-import numpy as np
-
 from sim.quiet_output import quiet_stdout
+from sim.reused_parts import ReusedParts
 from sim.uncopyable import Uncopyable
 
 with quiet_stdout():
@@ -54,13 +53,6 @@ class _BoundClient(Uncopyable, BulletClient):
     """``BulletClient`` that cannot be copied (its copy's ``__del__`` would disconnect)."""
 
     copy_advice = "a copy would disconnect the server when it is garbage-collected"
-
-
-def _frozen(value):
-    """Return ``value`` with its lists, tuples and arrays as nested tuples (a dict key)."""
-    if isinstance(value, list | tuple | np.ndarray):
-        return tuple(_frozen(item) for item in value)
-    return value
 
 
 DEFAULT_TIME_STEP = 1.0 / 240.0
@@ -109,7 +101,7 @@ class PhysicsState:
     generation: int = 0
 
 
-class SimClient(Uncopyable):
+class SimClient(ReusedParts, Uncopyable):
     """A PyBullet physics server with fixed time step, gravity and deterministic settings.
 
     Parameters
@@ -182,6 +174,10 @@ class SimClient(Uncopyable):
         self._closed = False
         self.generation = 0
         self._shapes: dict[tuple, int] = {}
+        # Static bodies kept through clear(keep_static=True), in creation order (the
+        # lowest ids), with their keys; how many of them the current build took again.
+        self._kept: list[tuple[object, int]] = []
+        self._claimed = 0
         # The display first: PyBullet answers getDebugVisualizerCamera (all zeros
         # otherwise) only for a GUI that is the process's client 0.
         self.display: BulletClient | None = _open_display() if self.gui else None
@@ -263,45 +259,14 @@ class SimClient(Uncopyable):
         finally:
             self.engine_time_s += time.perf_counter() - start
 
-    def collision_shape(self, shape_type: int, **options) -> int:
-        """Return the collision shape of ``shape_type`` and ``options``, made once per server.
-
-        The arguments are ``createCollisionShape``'s; a second call with equal arguments
-        returns the same shape (bodies share it), also after :meth:`clear`.
-
-        Examples
-        --------
-        >>> with SimClient() as sim:
-        ...     ball = sim.collision_shape(sim.bullet.GEOM_SPHERE, radius=0.1)
-        ...     same = sim.collision_shape(sim.bullet.GEOM_SPHERE, radius=0.1)
-        ...     other = sim.collision_shape(sim.bullet.GEOM_SPHERE, radius=0.2)
-        ...     ball == same, ball == other
-        (True, False)
-        """
-        return self._shape("collision", self.bullet.createCollisionShape, shape_type, options)
-
-    def visual_shape(self, shape_type: int, **options) -> int:
-        """Return the visual shape of ``shape_type`` and ``options``, made once per server.
-
-        The arguments are ``createVisualShape``'s (see :meth:`collision_shape`).
-        """
-        return self._shape("visual", self.bullet.createVisualShape, shape_type, options)
-
-    def _shape(self, kind: str, create, shape_type: int, options: dict) -> int:
-        self._require_open()
-        key = (kind, shape_type, _frozen(sorted(options.items())))
-        shape = self._shapes.get(key)
-        if shape is None:
-            shape = self._shapes[key] = int(create(shape_type, **options))
-        return shape
-
-    def clear(self) -> None:
+    def clear(self, *, keep_static: bool = False) -> None:
         """Remove every body and set the clock and engine time to zero; keep the shapes.
 
         What a fresh server would give: the bodies built next get the ids they would get
         there (PyBullet hands out the ids freed last first, so they are freed from the
         highest down), the settings (gravity, time step, solver) stay. States saved
-        before cannot be restored any more (:attr:`generation`).
+        before cannot be restored any more (:attr:`generation`). ``keep_static`` keeps
+        the bodies made by :meth:`static_body`, for the next build to take again.
 
         Examples
         --------
@@ -316,10 +281,12 @@ class SimClient(Uncopyable):
         (True, 0, 1)
         """
         self._require_open()
-        bullet = self.bullet
-        bodies = [bullet.getBodyUniqueId(index) for index in range(bullet.getNumBodies())]
-        for body in sorted(bodies, reverse=True):
-            bullet.removeBody(body)
+        bodies = self._bodies()
+        kept = [body for _, body in self._kept]
+        if not keep_static or bodies[:len(kept)] != kept:
+            kept = self._kept = []
+        self._remove(bodies[len(kept):])
+        self._claimed = 0
         self._steps = 0
         self.engine_time_s = 0.0
         self.generation += 1
@@ -403,10 +370,11 @@ class SimClient(Uncopyable):
 def emptied_or_new(sim: SimClient | None, *, gui: bool, time_step: float) -> SimClient:
     """Return ``sim`` emptied (:meth:`SimClient.clear`) for a new run, or a new client.
 
-    ``sim`` is reused when it is open, headless and has ``time_step``: its shapes serve
-    the new run (PyBullet never frees a mesh, so a new server per run grew the process
-    by ~4 MB per reset of the tiny world). Otherwise it is closed and a new client made;
-    with a GUI always, as the display shows one server's bodies.
+    ``sim`` is reused when it is open, headless and has ``time_step``: its shapes and
+    static bodies (:meth:`SimClient.static_body`) serve the new run (PyBullet never frees
+    a mesh, so a new server per run grew the process by ~4 MB per reset of the tiny
+    world). Otherwise it is closed and a new client made; with a GUI always, as the
+    display shows one server's bodies.
 
     Examples
     --------
@@ -422,7 +390,7 @@ def emptied_or_new(sim: SimClient | None, *, gui: bool, time_step: float) -> Sim
     """
     if sim is not None and not sim.closed and not gui and not sim.gui \
             and sim.time_step == time_step:
-        sim.clear()
+        sim.clear(keep_static=True)
         return sim
     if sim is not None:
         sim.close()
