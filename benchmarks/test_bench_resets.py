@@ -1,11 +1,12 @@
 """Benchmark: 1,000 resets of one bench of the tiny world, resident memory and time.
 
 Issue 29's acceptance: the resident memory after the 1,000th reset within 20 MB of after
-the 10th. Measured (2 shared cores): 262.3 MB after the 10th, 288.1 MB after the 1,000th
-(+25.8 MB, ~26 KB per reset), 64 s. Before the shapes were reused a reset grew the process
-by ~4 MB (30 resets: +123 MB). What is left is PyBullet's: its ``loadURDF`` of the robot
-alone keeps ~9 KB per load on a cleared server (1,000 loads: +9 MB), the rest is in the
-server's own bookkeeping, not in Python (tracemalloc: < 0.1 MB over 200 resets).
+the 10th. Measured (2 shared cores): 261.9 MB after the 10th, 273.8 MB after the 1,000th
+(+11.9 MB, ~12 KB per reset), 72 s. A new server per reset grew the process by ~4 MB per
+reset (30 resets: +123 MB; PyBullet never frees a mesh); with shapes reused but bodies
+built again, +25.8 MB (PyBullet keeps ~1 KB of every body created and removed). What is
+left is PyBullet's own: its ``loadURDF`` of the robot keeps ~9 KB per load on a cleared
+server (1,000 loads: +9 MB); Python's share is < 0.1 MB over 200 resets (tracemalloc).
 
 Run: ``.venv/bin/python -m pytest -m bench -s benchmarks/test_bench_resets.py``
 """
@@ -29,8 +30,6 @@ def resident_mb() -> float:
 
 
 @pytest.mark.bench
-@pytest.mark.xfail(strict=True, reason="PyBullet keeps ~26 KB per reset (robot URDF and server "
-                   "bookkeeping): +25.8 MB over 1,000 resets, measured")
 def test_a_thousand_resets_keep_resident_memory_within_20_mb(tmp_path):
     spec = load_scenario(write_tiny(tmp_path))
     with Testbench(spec) as bench:
