@@ -216,7 +216,7 @@ def main_run(args: argparse.Namespace) -> int:
     from scenarios.logs.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.logs.recording import ScanRecorder, check_new_recording_path
     from scenarios.results.outputs import summarize, write_outputs
-    from scenarios.spec.layout import estimated_sim_time
+    from scenarios.spec.layout import estimated_sim_time, lap_worlds
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     out = check_output_dir(args.out if args.out is not None else Path("results") / spec.name)
@@ -265,7 +265,8 @@ def main_run(args: argparse.Namespace) -> int:
                             sharing_off=sharing_off)
     summary = _run_summary(metrics, out)
     if scan_recorder is not None:
-        scan_recorder.write(args.record, spec, metrics)
+        # Fingerprinted with the world the runs drove, not the file as it is now.
+        scan_recorder.write(args.record, spec, metrics, worlds=lap_worlds(spec, world=world))
         summary += f"\nrecording in {args.record}/ ({scan_recorder.scans} scans)"
     if timeline is not None:
         # After the outputs too: a recording inside --out lands in the published directory.
