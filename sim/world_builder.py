@@ -235,6 +235,7 @@ class SimWorld:
             self._add_wall(f"wall_{index}", wall)
         for index, post in enumerate(spec.posts):
             self._add_post(f"post_{index}", post)
+        sim.end_static_bodies()  # what never moves comes first: kept through resets
         for box in spec.boxes:
             self.add_box(box)
         for person in spec.active_people:
@@ -383,7 +384,7 @@ walk and remission can change
         sx, sy, sz = box.size
         x, y, yaw = box.pose
         footprint = 0.5 * np.array([[sx, -sy], [sx, sy], [-sx, sy], [-sx, -sy]])
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_BOX,
             halfExtents=[0.5 * sx, 0.5 * sy, 0.5 * sz],
             visualFramePosition=[0.0, 0.0, 0.5 * sz],
@@ -431,18 +432,18 @@ walk and remission can change
 
     def _create_floor(self) -> int:
         bullet = self._bullet
-        body = bullet.createMultiBody(
+        body = self.sim.static_body("floor", lambda: bullet.createMultiBody(
             baseMass=0.0,
-            baseCollisionShapeIndex=bullet.createCollisionShape(bullet.GEOM_PLANE),
+            baseCollisionShapeIndex=self.sim.collision_shape(bullet.GEOM_PLANE),
             # a thin slab as the floor's look: pybullet has no visual for GEOM_PLANE
-            baseVisualShapeIndex=bullet.createVisualShape(
+            baseVisualShapeIndex=self.sim.visual_shape(
                 bullet.GEOM_BOX,
                 halfExtents=[_FLOOR_VISUAL_HALF_SIZE, _FLOOR_VISUAL_HALF_SIZE, 0.005],
                 visualFramePosition=[0.0, 0.0, -0.005],
                 rgbaColor=_RGBA[TAG_FLOOR],
             ),
             basePosition=[0.0, 0.0, 0.0],
-        )
+        ))
         self._register(body, BodyInfo("floor", TAG_FLOOR, FLOOR_REMISSION))
         return body
 
@@ -460,6 +461,7 @@ walk and remission can change
         height: float,
         visual: int,
         pose: tuple[float, float, float],
+        keep: object = None,
     ) -> int:
         """Create a static body whose collision shape is the exact prism over ``footprint``.
 
@@ -469,7 +471,7 @@ walk and remission can change
         The body frame sits on the floor under the footprint's origin.
         """
         vertices, indices = prism_mesh(footprint, height)
-        return self._add_mesh(info, vertices, indices, visual, pose)
+        return self._add_mesh(info, vertices, indices, visual, pose, keep)
 
     def _add_mesh(
         self,
@@ -478,20 +480,31 @@ walk and remission can change
         indices: np.ndarray,
         visual: int,
         pose: tuple[float, float, float],
+        keep: object = None,
     ) -> int:
-        """Create a static body of the triangle mesh, its frame at ``pose`` on the floor."""
+        """Create a static body of the triangle mesh, its frame at ``pose`` on the floor.
+
+        ``keep``: the key of a body that never moves, kept through resets
+        (``SimClient.static_body``).
+        """
         bullet = self._bullet
-        shape = bullet.createCollisionShape(
+        # Made once per server and shared (SimClient.collision_shape): PyBullet never
+        # frees a mesh, and a world rebuilt at each reset would grow by its meshes.
+        shape = self.sim.collision_shape(
             bullet.GEOM_MESH, vertices=vertices.tolist(), indices=indices.tolist()
         )
         x, y, yaw = pose
-        body = bullet.createMultiBody(
-            baseMass=0.0,
-            baseCollisionShapeIndex=shape,
-            baseVisualShapeIndex=visual,
-            basePosition=[x, y, 0.0],
-            baseOrientation=bullet.getQuaternionFromEuler([0.0, 0.0, yaw]),
-        )
+
+        def create() -> int:
+            return bullet.createMultiBody(
+                baseMass=0.0,
+                baseCollisionShapeIndex=shape,
+                baseVisualShapeIndex=visual,
+                basePosition=[x, y, 0.0],
+                baseOrientation=bullet.getQuaternionFromEuler([0.0, 0.0, yaw]),
+            )
+
+        body = create() if keep is None else self.sim.static_body(keep, create)
         self._register(body, info)
         return body
 
@@ -501,30 +514,34 @@ walk and remission can change
         footprint = np.array(
             [[half_x, -half_y], [half_x, half_y], [-half_x, half_y], [-half_x, -half_y]]
         )
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_BOX,
             halfExtents=[half_x, half_y, 0.5 * wall.height],
             visualFramePosition=[0.0, 0.0, 0.5 * wall.height],
             rgbaColor=_RGBA[TAG_WALL],
         )
         info = BodyInfo(name, TAG_WALL, wall.remission)
-        return self._add_prism(info, footprint, wall.height, visual, (cx, cy, yaw))
+        return self._add_prism(info, footprint, wall.height, visual, (cx, cy, yaw),
+                               keep=("wall", wall))
 
     def _add_cylinder(
-        self, info: BodyInfo, x: float, y: float, radius: float, height: float
+        self, info: BodyInfo, x: float, y: float, radius: float, height: float,
+        keep: object = None,
     ) -> int:
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_CYLINDER,
             radius=radius,
             length=height,
             visualFramePosition=[0.0, 0.0, 0.5 * height],
             rgbaColor=_RGBA[info.tag],
         )
-        return self._add_prism(info, circle_footprint(radius), height, visual, (x, y, 0.0))
+        return self._add_prism(info, circle_footprint(radius), height, visual, (x, y, 0.0),
+                               keep)
 
     def _add_post(self, name: str, post: PostSpec) -> int:
         info = BodyInfo(name, TAG_POST, post.remission)
-        return self._add_cylinder(info, post.x, post.y, post.radius, post.height)
+        return self._add_cylinder(info, post.x, post.y, post.radius, post.height,
+                                  keep=("post", post))
 
     def _add_person(self, person: PersonSpec) -> int:
         self._require_new_name(person.name, "person")
@@ -540,7 +557,7 @@ walk and remission can change
             return self._add_cylinder(info, x, y, 0.5 * piece.diameter, piece.length)
         radius = 0.5 * piece.diameter
         vertices, indices = lying_cylinder_mesh(piece.diameter, piece.length)
-        visual = self._bullet.createVisualShape(
+        visual = self.sim.visual_shape(
             self._bullet.GEOM_CYLINDER,
             radius=radius,
             length=piece.length,

@@ -20,6 +20,7 @@ from scenarios.bench.observer import Observer, ProgressReporter, ScanCallback
 from scenarios.bench.records import RunLog, ScanRecord
 from scenarios.bench.testbench import Testbench
 from scenarios.spec.scenario import ScenarioSpec
+from worlds.spec import WorldSpec
 
 __all__ = ["run_scenario"]
 
@@ -31,6 +32,7 @@ def run_scenario(
     progress: Callable[[float], None] | None = None,
     on_scan: Callable[[ScanRecord], None] | None = None,
     observers: Sequence[Observer] = (),
+    world: WorldSpec | None = None,
 ) -> RunLog:
     """Run every lap of ``spec`` in a fresh PyBullet world and return the log.
 
@@ -39,8 +41,11 @@ def run_scenario(
     the local map update, with a :class:`ScanRecord` (its map polylines and fields
     included). ``observers`` are added to the bench after those (e.g. a
     :class:`~scenarios.logs.bag.BagRecorder` for a ROS 2 bag or a
-    :class:`~scenarios.logs.recording.ScanRecorder`). Same spec (and seed) -> identical log
-    and records, except the timing figures.
+    :class:`~scenarios.logs.recording.ScanRecorder`). ``world``, the scenario's world as
+    loaded already (:func:`scenarios.spec.layout.scenario_world`), spares reading its file
+    again: a command's runs all use the world it loaded at the start, whatever happens to
+    the file meanwhile. Same spec (and seed) -> identical log and records, except the
+    timing figures.
 
     Examples
     --------
@@ -49,7 +54,7 @@ def run_scenario(
     >>> len(log.laps), log.laps[0].collisions
     (1, 0)
     """
-    with Testbench(spec, gui=gui) as bench:
+    with Testbench(spec, gui=gui, world=world) as bench:
         if progress is not None:
             bench.add_observer(ProgressReporter(progress))
         if on_scan is not None:

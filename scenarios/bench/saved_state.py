@@ -36,8 +36,7 @@ __all__ = ["BenchState", "SavedStates"]
 
 NOT_COPIED = ("_sim", "vehicles")
 """Bench attributes a saved state leaves out: the physics client (PyBullet saves its state)
-and the read-only view of the fleet (rebuilt from the fleet; a mapping proxy cannot be copied,
-which is also why ``copy.deepcopy`` of a bench is refused)."""
+and the read-only view of the fleet (rebuilt from the fleet; a mapping proxy cannot be copied)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,7 +69,8 @@ class SavedStates:
         The physics (PyBullet's ``saveState``) and a deep copy of everything else: the
         vehicles' stacks (EKF, odometry, follower, maps, supervisor), logs, observers,
         people and triggers, the clock and the random streams. ``copy.deepcopy`` of a
-        bench itself is refused (two benches would step one physics server);
+        bench itself is refused with a ``TypeError`` before anything is copied (two
+        benches would step one physics server);
         :meth:`release_state` frees the physics part.
 
         Examples
@@ -128,9 +128,13 @@ class SavedStates:
             self._sim.remove_state(state.physics)
 
     def _shared_in_copies(self) -> dict[int, object]:
-        # A deepcopy memo: copies keep this bench (observers' view) and its physics client.
+        # A deepcopy memo: copies keep this bench (observers' view) and its physics client
+        # and display (which refuse copies: sim.client.Uncopyable).
         sim = self._sim
-        return {id(self): self, id(sim): sim, id(sim.bullet): sim.bullet}
+        shared = {id(self): self, id(sim): sim, id(sim.bullet): sim.bullet}
+        if sim.display is not None:
+            shared[id(sim.display)] = sim.display
+        return shared
 
     def replace_people(self, scenario: ScenarioSpec) -> None:
         """Go on with ``scenario``, whose world's people differ from the running one's.

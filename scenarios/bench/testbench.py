@@ -64,8 +64,9 @@ from scenarios.spec.routes import fleet_vehicles, vehicle_route
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments
 from semistatic.fleet import FleetMapStore
-from sim.client import SimClient
+from sim.client import SimClient, emptied_or_new
 from sim.random_streams import RandomStreams
+from sim.uncopyable import Uncopyable
 from sim.world_builder import SimWorld
 from worlds.checks import build_spline
 from worlds.spec import BoxSpec, WorldSpec
@@ -73,7 +74,7 @@ from worlds.spec import BoxSpec, WorldSpec
 __all__ = ["Testbench"]
 
 
-class Testbench(SavedStates, LeadVehicleView):
+class Testbench(Uncopyable, SavedStates, LeadVehicleView):
     """A scenario's closed loop with an explicit life cycle, state to read and observers.
 
     Parameters
@@ -102,6 +103,11 @@ class Testbench(SavedStates, LeadVehicleView):
     moment. Observers added before :meth:`reset` see lap 1 start; the bench hands them
     itself (:class:`~scenarios.bench.observer.Observer`).
 
+    A bench is used by one thread at a time; benches in different threads are safe. A
+    :meth:`reset` reuses the bench's PyBullet server: memory stays flat over thousands of
+    resets. Copying or pickling a bench raises ``TypeError`` and leaves it untouched:
+    :meth:`save_state` / :meth:`restore_state` are its snapshots.
+
     Examples
     --------
     >>> with Testbench("pal1") as bench:
@@ -112,6 +118,8 @@ class Testbench(SavedStates, LeadVehicleView):
     """
 
     __test__ = False  # a name starting with "Test" is not a test class
+    copy_advice = ("it drives a PyBullet server; take a snapshot with save_state() and go "
+                   "back with restore_state(), or build another Testbench(bench.spec)")
 
     def __init__(
         self,
@@ -183,7 +191,6 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         ...     bench.lap, bench.log.spec.seed, bool(error < 0.05)
         (1, 4, True)
         """
-        self.close()
         self._wall_start = time.perf_counter()
         spec = self._spec if seed is None else dataclasses.replace(self._spec, seed=seed)
         self._worlds = lap_worlds(spec, world=self._world_override)
@@ -191,7 +198,8 @@ the hooks you need (on_lap_start, on_scan, on_tick, on_lap_end)
         segments = path_segments(base_world, build_spline(base_world.path))
         self.log = RunLog(spec=spec, world=base_world, robot=self._robot_spec, segments=segments)
         rates = spec.rates
-        self._sim = sim = SimClient(gui=self.gui, time_step=1.0 / rates.physics_hz)
+        # The last run's server, emptied (its meshes kept: memory stays flat over resets)
+        self._sim = sim = emptied_or_new(self._sim, gui=self.gui, time_step=1.0 / rates.physics_hz)
         store = FleetMapStore() if spec.sharing and self.fleet_size > 1 else None
         self.scene = scene = Scene(spec, sim, SimWorld(sim, base_world), segments,
                                    RandomStreams(spec.seed), store)

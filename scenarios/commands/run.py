@@ -223,7 +223,7 @@ def main_run(args: argparse.Namespace) -> int:
     from scenarios.logs.bag import BAG_TOPICS, BagRecorder, check_new_bag_path, write_run_bag
     from scenarios.logs.recording import ScanRecorder, check_new_recording_path
     from scenarios.results.outputs import summarize, write_outputs
-    from scenarios.spec.layout import estimated_sim_time
+    from scenarios.spec.layout import estimated_sim_time, lap_worlds
 
     spec, world = _load(args.scenario, args.overrides, args.laps, args.seed)
     out = args.out if args.out is not None else Path("results") / spec.name
@@ -250,7 +250,8 @@ def main_run(args: argparse.Namespace) -> int:
     total = estimated_sim_time(spec, world)
     try:
         with sim_progress(total, f"{spec.name} ({spec.policy})", spec.laps) as bar:
-            log = run_scenario(spec, gui=args.gui, progress=bar, observers=observers)
+            log = run_scenario(spec, gui=args.gui, progress=bar, observers=observers,
+                               world=world)
     except BaseException:
         if timeline is not None:
             timeline.close(finish=False)  # no half recording at --rrd
@@ -259,8 +260,10 @@ def main_run(args: argparse.Namespace) -> int:
     if args.compare:
         comparison = {}
         for other in _other_policies(spec):
+            # The world as loaded at the start, never its file again (it may have changed).
             with sim_progress(total, f"{spec.name} ({other})", spec.laps) as bar:
-                other_log = run_scenario(dataclasses.replace(spec, policy=other), progress=bar)
+                other_log = run_scenario(dataclasses.replace(spec, policy=other), progress=bar,
+                                         world=world)
             comparison[other] = summarize(other_log)
     sharing_off = None
     if args.compare_sharing:
@@ -269,12 +272,13 @@ def main_run(args: argparse.Namespace) -> int:
                              "(sharing = false); add --set sharing=true")
         off_spec = dataclasses.replace(spec, sharing=False)
         with sim_progress(total, f"{spec.name} (sharing off)", spec.laps) as bar:
-            sharing_off = summarize(run_scenario(off_spec, progress=bar))
+            sharing_off = summarize(run_scenario(off_spec, progress=bar, world=world))
     metrics = write_outputs(log, out, figures=not args.no_figures, comparison=comparison,
                             sharing_off=sharing_off)
     summary = _run_summary(metrics, out)
     if scan_recorder is not None:
-        scan_recorder.write(args.record, spec, metrics)
+        # Fingerprinted with the world the runs drove, not the file as it is now.
+        scan_recorder.write(args.record, spec, metrics, worlds=lap_worlds(spec, world=world))
         summary += f"\nrecording in {args.record}/ ({scan_recorder.scans} scans)"
     if timeline is not None:
         # After the outputs too: a recording inside --out lands in the published directory.
@@ -365,18 +369,22 @@ def _run_summary(metrics: dict, out: Path) -> str:
     return "\n".join(lines)
 
 
-def _table_job(task: tuple[str, int | None, Path, bool, bool]) -> tuple[str, dict]:
-    """Run one bundled scenario (in a worker) and write its folder into the staging dir."""
+def _table_job(task: tuple) -> tuple[str, dict]:
+    """Run one bundled scenario (in a worker) and write its folder into the staging dir.
+
+    ``task`` holds the scenario and world the command loaded at the start: no run reads a
+    file again.
+    """
     from scenarios.bench.runner import run_scenario
     from scenarios.results.outputs import summarize, write_outputs
 
-    name, laps, staging, figures, compare = task
-    spec, _ = _load(name, [], laps)
+    name, spec, world, staging, figures, compare = task
     comparison = None
     if compare:
-        comparison = {other: summarize(run_scenario(dataclasses.replace(spec, policy=other)))
+        comparison = {other: summarize(run_scenario(dataclasses.replace(spec, policy=other),
+                                                    world=world))
                       for other in _other_policies(spec)}
-    metrics = write_outputs(run_scenario(spec), staging / name, figures=figures,
+    metrics = write_outputs(run_scenario(spec, world=world), staging / name, figures=figures,
                             comparison=comparison)
     return name, metrics
 
@@ -389,15 +397,16 @@ def main_table(args: argparse.Namespace) -> int:
 
     names = paper_scenarios()
     check_jobs(args.jobs)
-    for name in names:
-        _load(name, [], args.laps)  # fail fast on bad input, before any run
+    # Fail fast on bad input, before any run; the runs use what is loaded here.
+    loaded = {name: _load(name, [], args.laps) for name in names}
     check_output_paths({"--out": args.out})
     out = check_output_dir(args.out)
     results: dict[str, dict] = {}
 
     def fill(staging: Path) -> None:
         # The whole table is staged: an interrupted table leaves the previous one intact.
-        tasks = [(name, args.laps, staging, not args.no_figures, args.compare) for name in names]
+        tasks = [(name, *loaded[name], staging, not args.no_figures, args.compare)
+                 for name in names]
         with count_progress(len(names), "table", "scenario") as advance:
             if args.jobs == 1:
                 outcomes = map(_table_job, tasks)

@@ -204,11 +204,13 @@ class ScanRecorder(Observer):
         self._lap_layouts[-1]["end"] = self._layout(vehicle)
 
     def write(self, directory: str | os.PathLike[str], spec: ScenarioSpec,
-              metrics: Mapping[str, Any]) -> None:
+              metrics: Mapping[str, Any], worlds: Sequence | None = None) -> None:
         """Write the recording as the new directory ``directory``.
 
         The files go into a staging directory beside it, renamed into place when complete,
-        so an interruption never leaves a recording that looks whole.
+        so an interruption never leaves a recording that looks whole. ``worlds``, the
+        run's lap worlds (:func:`scenarios.spec.layout.lap_worlds`), fingerprint the
+        world the run drove; without them the world file is read again.
         """
         directory = Path(directory)
         arrays = {
@@ -235,7 +237,7 @@ class ScanRecorder(Observer):
             "laps": spec.laps,
             "policy": policy_name(spec.policy),
             "scenario_source": spec.source,
-            "fingerprint": spec_fingerprint(spec),
+            "fingerprint": spec_fingerprint(spec, worlds),
             "segments": self._segments,
             "layouts": self._layouts,
             "lap_layouts": self._lap_layouts,
