@@ -22,10 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from robots.presets import PRESETS
-from scenarios.spec.field_sizing import check_field_sizes
-from scenarios.spec.layout import check_scenario_layout, robot_preset, scenario_world
-from scenarios.spec.pieces import check_piece_sightings
-from scenarios.spec.routes import check_vehicles
+from scenarios.spec.preflight import check_scenario
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError, join_key
 from semistatic.noise import spec_noise_params
@@ -331,14 +328,7 @@ def scenario_from_toml(
             spec = dataclasses.replace(spec, moves=kept)
     if check_layout:
         with _blame_overrides(file, keys):
-            check_scenario_layout(spec, moves=file_spec.moves)
-            world = scenario_world(spec)
-            if spec.vehicles:
-                check_vehicles(spec, world)
-            robots = {vehicle.robot or spec.robot for vehicle in spec.vehicles} or {spec.robot}
-            for robot in sorted(robots):
-                check_field_sizes(spec, world, robot_preset(robot, file=spec.source))
-            check_piece_sightings(spec, world)
+            check_scenario(spec, moves=file_spec.moves)
     return spec
 
 
