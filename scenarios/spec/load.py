@@ -300,7 +300,9 @@ def scenario_from_toml(
     (:func:`scenarios.spec.layout.check_scenario_layout`), which loads the world, and
     every segment's protective field against the standard's formula
     (:func:`scenarios.spec.field_sizing.check_field_sizes`) and every test piece against
-    every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`).
+    every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`)
+    and every vehicle's start (:func:`scenarios.spec.starts.check_starts`): the one pass
+    of :func:`scenarios.spec.preflight.check_scenario`.
 
     Examples
     --------

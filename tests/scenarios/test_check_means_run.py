@@ -10,18 +10,23 @@ anything is written; a hand-made uneven layout still passes and its run starts.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from scenarios.bench.testbench import Testbench
 from scenarios.spec.load import load_scenario
+from scenarios.spec.starts import check_starts
 from semistatic.errors import MEMORY, SpecError
 from tests.scenarios.tiny_world import TINY_SCENARIO, TINY_WORLD, write_tiny
 from worlds.load import load_world
+from worlds.spec import PersonSpec
 
 _TINY_POSTS = TINY_WORLD[TINY_WORLD.index("posts = ["):TINY_WORLD.index("[path]")]
 
@@ -162,3 +167,29 @@ def test_uneven_run_starts(tmp_path):
         bench.reset()
         assert bench.lap == 1
         assert abs(bench.ekf_pose - bench.true_pose).max() < 0.05
+
+
+@pytest.fixture(scope="module")
+def tiny_spec(tmp_path_factory):
+    return load_scenario(write_tiny(tmp_path_factory.mktemp("tiny")))
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(x=st.floats(-1.0, 1.0), y=st.floats(-0.8, 0.8), radius=st.floats(0.1, 0.4))
+def test_a_standing_person_is_refused_exactly_when_on_the_start_footprint(
+        tiny_spec, x, y, radius):
+    """Against the closed form: a disc meets the Pioneer's rectangle at the start pose
+    (0, 0, heading 0: +-0.2275 m along x, +-0.1905 m across) when the rectangle's nearest
+    point is within the radius."""
+    half_length, half_width = 0.2275, 0.1905
+    gap = math.hypot(max(abs(x) - half_length, 0.0), max(abs(y) - half_width, 0.0))
+    assume(abs(gap - radius) > 1e-6)
+    world = load_world(tiny_spec.world)
+    person = PersonSpec("stander", waypoints=((x, y),), radius=radius)
+    world = dataclasses.replace(world, people=(person,)).enable_people("stander")
+    if gap < radius:
+        with pytest.raises(SpecError, match=r"people\[0\]: person 'stander'"):
+            check_starts(tiny_spec, world)
+    else:
+        check_starts(tiny_spec, world)
