@@ -180,10 +180,10 @@ def tiny_spec(tmp_path_factory):
 def test_a_standing_person_is_refused_exactly_when_on_the_start_footprint(
         tiny_spec, x, y, radius):
     """Against the closed form: a disc meets the Pioneer's rectangle at the start pose
-    (0, 0, heading 0: +-0.2275 m along x, +-0.1905 m across) when the rectangle's nearest
-    point is within the radius."""
-    half_length, half_width = 0.2275, 0.1905
-    gap = math.hypot(max(abs(x) - half_length, 0.0), max(abs(y) - half_width, 0.0))
+    (0, 0, heading 0; base_link on the wheel axle: x from -0.2725 m behind to 0.1825 m
+    ahead, +-0.1905 m across) when the rectangle's nearest point is within the radius."""
+    rear, front, half_width = -0.2725, 0.1825, 0.1905
+    gap = math.hypot(max(rear - x, 0.0, x - front), max(abs(y) - half_width, 0.0))
     assume(abs(gap - radius) > 1e-6)
     world = load_world(tiny_spec.world)
     person = PersonSpec("stander", waypoints=((x, y),), radius=radius)
