@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 
 from scenarios import ScenarioSpec, Testbench
+from scenarios.spec.scenario import SafetySettings
 from semistatic.params import MapperParams
 from worlds.spec import BoxSpec, PathSpec, PostSpec, SegmentSpec, WallSpec, WorldSpec
 
@@ -61,7 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--push-at", type=float, default=2.0,
                         help="robot x (m) in lap 2 at which carton_b is pushed")
     args = parser.parse_args(argv)
+    # The corridor is too narrow for the protective field the standard asks for at
+    # 0.4 m/s (1.28 m wide); the script studies the map, not the stop: say so.
     spec = ScenarioSpec(name="pushed", world="corridor", laps=args.laps,
+                        safety=SafetySettings(undersized_fields=True),
                         mapper=MapperParams(hausdorff_restriction="projection"))
     with Testbench(spec, world=corridor()) as bench:
         bench.reset(seed=0)

@@ -645,10 +645,48 @@ class EKFLocalizer:
         )
         return pose, self._repair_covariance(jacobian @ sensor_cov @ jacobian.T)
 
+    def best_matches(
+        self, observations: Sequence[LandmarkObservation]
+    ) -> list[tuple[tuple[int, int], ...]]:
+        """Return every best match of ``observations`` to the map, by geometry alone.
+
+        A match is the ``(observation, landmark)`` pairs of one hypothesis (three
+        observations placed on three landmarks with the same pairwise distances, then
+        verified against all observations); the best are those with the most pairs.
+        :meth:`relocalize` uses the only one, or, when several tie, the one nearest the
+        current estimate; a filter that has no estimate yet (lap 1) cannot choose. So
+        more than one match means the layout is ambiguous from where the posts were
+        seen, and none means fewer than three posts could be matched.
+
+        Examples
+        --------
+        >>> posts = [[0.0, 2.0], [2.0, 2.0], [4.0, 2.0], [1.0, -2.0], [3.0, -2.0]]  # even
+        >>> seen = [LandmarkObservation(math.hypot(x - 1.0, y), math.atan2(y, x - 1.0),
+        ...                             np.diag([1e-4, 1e-6]), [])
+        ...         for x, y in (posts[0], posts[1], posts[3])]   # seen from (1, 0), ahead
+        >>> len(EKFLocalizer(posts).best_matches(seen))   # shifted by 2 m, or turned round
+        3
+        >>> uneven = [[0.0, 2.0], [2.0, 2.0], [4.0, 2.0], [1.0, -2.0], [3.6, -2.0]]
+        >>> EKFLocalizer(uneven).best_matches(seen)
+        [((0, 0), (1, 1), (2, 3))]
+        """
+        return [tuple((int(k), int(m)) for k, m in hypothesis.pairs)
+                for hypothesis in self._tied_hypotheses(observations)]
+
     def _best_hypothesis(self, observations: Sequence[LandmarkObservation]) -> _Hypothesis | None:
         """Match observations to landmarks by geometry alone; return the best match."""
-        if len(observations) < _MIN_TRIANGULATION_POSTS or self.landmarks.shape[0] < 3:
+        best = self._tied_hypotheses(observations)
+        if len(best) > 1 and self.initialized:
+            robot = self.pose[:2]
+            best.sort(key=lambda h: float(np.linalg.norm(h.sensor_pose[:2] - robot)))
+        elif len(best) > 1:
             return None
+        return best[0] if best else None
+
+    def _tied_hypotheses(self, observations: Sequence[LandmarkObservation]) -> list[_Hypothesis]:
+        """Return the hypotheses with the most verified pairs (none: no match)."""
+        if len(observations) < _MIN_TRIANGULATION_POSTS or self.landmarks.shape[0] < 3:
+            return []
         points = np.array([obs.point() for obs in observations])
         if self._has_bias:
             # Remove the estimated range bias: post-to-post distances come out truer.
@@ -669,15 +707,9 @@ class EKFLocalizer:
                     seen.add(key)
                     hypotheses.append(_Hypothesis(sensor_pose, pairs))
         if not hypotheses:
-            return None
+            return []
         most = max(len(h.pairs) for h in hypotheses)
-        best = [h for h in hypotheses if len(h.pairs) == most]
-        if len(best) > 1 and self.initialized:
-            robot = self.pose[:2]
-            best.sort(key=lambda h: float(np.linalg.norm(h.sensor_pose[:2] - robot)))
-        elif len(best) > 1:
-            return None
-        return best[0]
+        return [h for h in hypotheses if len(h.pairs) == most]
 
     def _landmark_triples(self, points: np.ndarray, tolerance: float) -> list[tuple[int, ...]]:
         """Return landmark triples congruent (same orientation) to three observed points."""

@@ -52,7 +52,7 @@ from numpy.typing import ArrayLike
 from robots.path import SplinePath
 from semistatic.errors import MEMORY, SpecError
 from semistatic.frames import transform_points, wrap_angle
-from worlds.spec import PathSpec, WorldSpec
+from worlds.spec import PathSpec, PersonSpec, WorldSpec
 
 __all__ = [
     "PIONEER_FOOTPRINT",
@@ -67,6 +67,7 @@ __all__ = [
     "overlapping_solids",
     "path_poses",
     "people_in_obstacles",
+    "person_area",
     "piece_scan_margins",
     "placed",
     "post_discs",
@@ -75,6 +76,7 @@ __all__ = [
     "static_in_warning",
     "swept_footprint",
     "visible_post_counts",
+    "visible_posts",
     "wall_footprint_gaps",
     "wall_polygons",
 ]
@@ -368,17 +370,41 @@ def visible_post_counts(
     [6, 2]
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    counts = np.zeros(len(poses), dtype=int)
+    rows, _ = visible_posts(world, poses, post_range=post_range, field_of_view=field_of_view)
+    return np.bincount(rows, minlength=len(poses)).astype(int)
+
+
+def visible_posts(
+    world: WorldSpec,
+    poses: ArrayLike,
+    *,
+    post_range: float = Clearances.post_range,
+    field_of_view: float = Clearances.field_of_view,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the ``(pose index, post index)`` pairs of every post a pose sees.
+
+    Seen as :func:`visible_post_counts` counts: within ``post_range`` of the pose, inside
+    the ``field_of_view`` centred on its heading, the line of sight to the post's centre
+    crossing no wall and no box. Pairs are ordered by pose, then post.
+
+    Examples
+    --------
+    >>> from worlds.load import load_world
+    >>> rows, posts = visible_posts(load_world("sim1"), [[1.0, 0.0, np.pi]])
+    >>> rows.tolist(), posts.tolist()
+    ([0, 0], [0, 5])
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    empty = np.zeros(0, dtype=int)
     if not world.posts:
-        return counts
+        return empty, empty
     rows, cols = _candidate_sight_lines(world, poses, post_range, field_of_view)
     if rows.size == 0:
-        return counts
+        return empty, empty
     blockers = shapely.union_all(wall_polygons(world) + box_polygons(world))
     shapely.prepare(blockers)
     clear = ~shapely.intersects(blockers, _sight_lines(world, poses, rows, cols))
-    np.add.at(counts, rows[clear], 1)
-    return counts
+    return rows[clear], cols[clear]
 
 
 def _candidate_sight_lines(
@@ -628,16 +654,29 @@ def people_in_obstacles(world: WorldSpec) -> dict[str, tuple[str, ...]]:
     labelled += solids[boxes:]
     blocked = {}
     for person in world.people:
-        walk = (
-            shapely.LineString(person.waypoints)
-            if len(person.waypoints) > 1
-            else shapely.Point(person.waypoints[0])
-        )
-        body = walk.buffer(person.radius)
+        body = person_area(person)
         hits = tuple(label for label, polygon in labelled if body.intersects(polygon))
         if hits:
             blocked[person.name] = hits
     return blocked
+
+
+def person_area(person: PersonSpec) -> shapely.Polygon:
+    """Return the ground a person covers: the body's disc swept along its waypoints.
+
+    Examples
+    --------
+    >>> from worlds.spec import PersonSpec
+    >>> standing = PersonSpec(name="p", waypoints=((1.0, 0.0),), radius=0.25)
+    >>> round(person_area(standing).area, 2), person_area(standing).bounds
+    (0.2, (0.75, -0.25, 1.25, 0.25))
+    """
+    walk = (
+        shapely.LineString(person.waypoints)
+        if len(person.waypoints) > 1
+        else shapely.Point(person.waypoints[0])
+    )
+    return walk.buffer(person.radius)
 
 
 def _box_names(labels: Iterable[str], world: WorldSpec) -> tuple[str, ...]:

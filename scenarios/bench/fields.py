@@ -39,7 +39,12 @@ from robots.presets import UGVSpec
 from robots.safety import SafetyOutput, SafetyPolicy, SafetySupervisor
 from robots.stopping import minimum_protective_field
 from scenarios.bench.bundled_policies import field_policy
-from scenarios.bench.policies import FieldView, checked_readings, counted_occupancy
+from scenarios.bench.policies import (
+    FieldView,
+    checked_readings,
+    checked_speed_cap,
+    counted_occupancy,
+)
 from scenarios.bench.records import AppliedFields
 from scenarios.spec.field_sizing import field_checks, required_size, stop_model
 from scenarios.spec.scenario import ScenarioSpec
@@ -144,11 +149,8 @@ class VehicleFields:
                                       minimum if self._guarded else None, readings,
                                       supervisor.policy.min_points)
         output = supervisor.update(occupancy, stamp)
-        cap = policy.speed_cap(view)
+        cap = checked_speed_cap(policy, policy.speed_cap(view))
         if cap is not None and cap < output.speed_scale:
-            if not 0.0 <= cap <= 1.0:
-                raise ValueError(f"policy {policy.name!r}: speed_cap(view) must be in [0, 1], "
-                                 f"got {cap!r}")
             output = SafetyOutput(cap, output.zone)
         self._judged = (segment, minimum, points, readings, output.zone)
         return output

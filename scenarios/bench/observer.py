@@ -230,12 +230,28 @@ def require_observer(observer: object) -> Observer:
     --------
     >>> require_observer(Observer()).wants_polylines
     False
+    >>> class Careless(Observer):
+    ...     wants_polylines = "yes"
+    >>> require_observer(Careless())
+    Traceback (most recent call last):
+    ...
+    TypeError: observer Careless.wants_polylines is str 'yes'; expected True or False
     """
     if not isinstance(observer, Observer):
         raise TypeError(
             f"observer {observer!r} is no scenarios.Observer: subclass it and override "
             f"the hooks you need ({', '.join(HOOKS)})"
         )
+    label = f"observer {type(observer).__name__}"
+    for flag in ("wants_polylines", "every_vehicle"):
+        value = getattr(observer, flag)
+        if not isinstance(value, bool | np.bool_):
+            raise TypeError(f"{label}.{flag} is {type(value).__name__} {value!r}; expected "
+                            "True or False")
+    for hook in HOOKS:
+        if not callable(getattr(observer, hook)):
+            raise TypeError(f"{label}.{hook} is {type(getattr(observer, hook)).__name__}, not "
+                            f"a method; expected def {hook}(self, vehicle, ...)")
     return observer
 
 

@@ -56,7 +56,9 @@ __all__ = [
     "FieldReadings",
     "FieldView",
     "checked_readings",
+    "checked_speed_cap",
     "counted_occupancy",
+    "policy_label",
     "policy_name",
 ]
 
@@ -181,12 +183,35 @@ def policy_name(policy: str | FieldPolicy) -> str:
     return policy if isinstance(policy, str) else str(policy.name)
 
 
+def policy_label(policy: FieldPolicy) -> str:
+    """Return how errors name a policy object: its class and its ``name``.
+
+    Examples
+    --------
+    >>> class Mine(FieldPolicy):
+    ...     name = "mine"
+    ...     def counted_readings(self, view):
+    ...         return None
+    >>> policy_label(Mine())
+    "policy Mine ('mine')"
+    """
+    return f"policy {type(policy).__name__} ({policy_name(policy)!r})"
+
+
+def _described(answer: object) -> str:
+    """Return what an answer is, for an error: its type, and for arrays dtype and shape."""
+    if isinstance(answer, np.ndarray):
+        return f"a {answer.dtype} array of shape {answer.shape}"
+    return "None" if answer is None else f"a {type(answer).__name__}"
+
+
 def checked_readings(policy: FieldPolicy, readings: object, count: int) -> FieldReadings | None:
     """Return a policy's answer for ``count`` readings, or raise naming what is wrong.
 
     An answer is ``None`` or :class:`FieldReadings` whose masks are ``None`` or ``(count,)``
     boolean arrays; anything else (an integer array would silently index instead of
-    mask) is a ``TypeError`` naming the policy and the hook.
+    mask, a float one would not mask at all) is a ``TypeError`` naming the policy's
+    class, the hook and what was expected. A few attribute reads per scan: no cost.
 
     Examples
     --------
@@ -199,28 +224,67 @@ def checked_readings(policy: FieldPolicy, readings: object, count: int) -> Field
     >>> checked_readings(Mine(), FieldReadings(np.ones(3, dtype=int)), 3)
     Traceback (most recent call last):
     ...
-    TypeError: policy 'mine': counted_readings(view).warning must be None or a \
-(3,) bool array (one entry per view.points row), got int64 array of shape (3,)
+    TypeError: policy Mine ('mine').counted_readings returned warning = a int64 array of \
+shape (3,); expected None or a boolean numpy array of shape (3,) (one entry per view.points row)
+    >>> checked_readings(Mine(), (None, None), 3)
+    Traceback (most recent call last):
+    ...
+    TypeError: policy Mine ('mine').counted_readings returned a tuple; expected \
+FieldReadings(warning=..., protective=...) or None
     """
     if readings is None:
         return None
-    name = f"policy {policy_name(policy)!r}: counted_readings(view)"
     if not isinstance(readings, FieldReadings):
         raise TypeError(
-            f"{name} must return FieldReadings or None, got {type(readings).__name__}"
+            f"{policy_label(policy)}.counted_readings returned {_described(readings)}; "
+            "expected FieldReadings(warning=..., protective=...) or None"
         )
     for field_name in ("warning", "protective"):
         mask = getattr(readings, field_name)
         if mask is None:
             continue
         if not (isinstance(mask, np.ndarray) and mask.dtype == bool and mask.shape == (count,)):
-            got = (f"{mask.dtype} array of shape {mask.shape}" if isinstance(mask, np.ndarray)
-                   else type(mask).__name__)
             raise TypeError(
-                f"{name}.{field_name} must be None or a ({count},) bool array (one entry "
-                f"per view.points row), got {got}"
+                f"{policy_label(policy)}.counted_readings returned {field_name} = "
+                f"{_described(mask)}; expected None or a boolean numpy array of shape "
+                f"({count},) (one entry per view.points row)"
             )
     return readings
+
+
+def checked_speed_cap(policy: FieldPolicy, cap: object) -> float | None:
+    """Return a policy's ``speed_cap`` answer, or raise naming the policy and the hook.
+
+    ``None`` (no cap) or a real number in [0, 1], a fraction of the path speed; a bool,
+    a tuple, an array, a string or ``nan`` is an error (``nan`` would never cap).
+
+    Examples
+    --------
+    >>> class Mine(FieldPolicy):
+    ...     name = "mine"
+    ...     def counted_readings(self, view):
+    ...         return None
+    >>> checked_speed_cap(Mine(), 0.5), checked_speed_cap(Mine(), None)
+    (0.5, None)
+    >>> checked_speed_cap(Mine(), (0.5,))
+    Traceback (most recent call last):
+    ...
+    TypeError: policy Mine ('mine').speed_cap returned a tuple; expected None or a number \
+in [0, 1] (a fraction of the path speed)
+    >>> checked_speed_cap(Mine(), 1.5)
+    Traceback (most recent call last):
+    ...
+    ValueError: policy Mine ('mine').speed_cap returned 1.5; expected None or a number \
+in [0, 1] (a fraction of the path speed)
+    """
+    if cap is None:
+        return None
+    expected = "expected None or a number in [0, 1] (a fraction of the path speed)"
+    if isinstance(cap, bool) or not isinstance(cap, int | float | np.integer | np.floating):
+        raise TypeError(f"{policy_label(policy)}.speed_cap returned {_described(cap)}; {expected}")
+    if not 0.0 <= cap <= 1.0:  # nan fails this too
+        raise ValueError(f"{policy_label(policy)}.speed_cap returned {cap!r}; {expected}")
+    return float(cap)
 
 
 def counted_occupancy(

@@ -15,7 +15,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 
 import numpy as np
@@ -23,6 +22,7 @@ import numpy as np
 from robots.landmarks import LandmarkObservation, detect_landmarks
 from robots.presets import UGVSpec
 from scenarios.bench.scene import Scene
+from scenarios.spec.starts import landmark_noise
 from semistatic.types import Scan
 from sim.encoders import WheelEncoders
 from sim.laser import RaycastLaser, vehicle_laser_group
@@ -94,13 +94,9 @@ class VehicleSensors:
 
     def landmarks(self, scan: Scan) -> list[LandmarkObservation]:
         """Return the reflective-post landmarks of a localization scan."""
-        laser = self.localization_mount.laser
-        return detect_landmarks(
-            scan,
-            post_radius=self.post_radius,
-            range_sigma=max(laser.range_sigma, 1e-3),
-            bearing_sigma=laser.angular_resolution / math.sqrt(12.0),
-        )
+        range_sigma, bearing_sigma = landmark_noise(self.localization_mount.laser)
+        return detect_landmarks(scan, post_radius=self.post_radius, range_sigma=range_sigma,
+                                bearing_sigma=bearing_sigma)
 
     def odometry(self) -> tuple[np.ndarray, np.ndarray]:
         """Return the odometry increment since the last read and its covariance."""

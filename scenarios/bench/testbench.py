@@ -60,6 +60,7 @@ from scenarios.bench.vehicle import Vehicle
 from scenarios.spec.clock import SensorClock
 from scenarios.spec.layout import lap_worlds, robot_preset
 from scenarios.spec.load import load_scenario
+from scenarios.spec.preflight import check_scenario
 from scenarios.spec.routes import fleet_vehicles, vehicle_route
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments
@@ -130,13 +131,16 @@ class Testbench(Uncopyable, SavedStates, LeadVehicleView):
         policy: str | FieldPolicy | None = None,
         gui: bool = False,
     ) -> None:
-        spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
+        loaded = not isinstance(scenario, ScenarioSpec)
+        spec = load_scenario(scenario) if loaded else scenario
         if policy is not None:
             spec = dataclasses.replace(spec, policy=policy)
         self._spec = spec
         self.gui = bool(gui)
         self._world_override = world
         self._robot_spec = robot_preset(spec.robot if robot is None else robot, file=spec.source)
+        if not loaded or world is not None or robot is not None:  # load_scenario checked
+            check_scenario(spec, world=world, robot=None if robot is None else self._robot_spec)
         self.fleet_size = len(fleet_vehicles(spec))
         # The bench's observers follow its first vehicle and receive the bench; each
         # vehicle's scoring observers are its own (attached at reset).

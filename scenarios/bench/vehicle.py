@@ -27,7 +27,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Mapping
 from types import MappingProxyType
@@ -35,7 +34,6 @@ from typing import Any
 
 import numpy as np
 
-from robots.ekf import EKFLocalizer, EKFParams
 from robots.follower import ChainedFormFollower, FollowerParams
 from robots.presets import UGVSpec
 from robots.safety import scan_points_in_robot_frame
@@ -50,6 +48,7 @@ from scenarios.spec.field_sizing import vehicle_deceleration
 from scenarios.spec.routes import fleet_frames
 from scenarios.spec.scenario import ScenarioSpec
 from scenarios.spec.segments import PathSegment, path_segments, segment_index
+from scenarios.spec.starts import start_localizer
 from semistatic.fleet import FleetMapStore, merge_segment_map
 from semistatic.frames import compose, transform_points
 from semistatic.local_map import LocalMap
@@ -120,14 +119,8 @@ class Vehicle:
         # (A single vehicle's log becomes the bench's after this: looked up at each scan.)
         self.sensors = VehicleSensors(scene, self.index, robot, self.body,
                                       lambda seconds: self.log.raycast_seconds.append(seconds))
-        posts = world.posts
-        # The laser's systematic range error (constant per unit, uniform in +-b) is the
-        # filter's fourth state; without it the EKF is overconfident (NEES ~100 on pal1).
-        bias_sigma = robot.localization_laser.laser.range_bias_max / math.sqrt(3.0)
-        self.ekf = EKFLocalizer(
-            [post.xy for post in posts],
-            EKFParams(mount=tuple(robot.localization_laser.pose2d()), range_bias_sigma=bias_sigma),
-        )
+        # The filter the start check localises with (scenarios.spec.starts) is this one.
+        self.ekf = start_localizer(robot, [post.xy for post in world.posts])
         follower = FollowerParams(speed=route.path.speed)
         braking = spec.faults.braking_factor
         if braking != 1.0:

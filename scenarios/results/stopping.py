@@ -65,7 +65,8 @@ def stop_corridor(robot: UGVSpec, speed: float) -> WorldSpec:
     distance. Posts stand irregularly along both walls (triangulation needs it).
     """
     half = 2.5
-    x0, x1 = -3.0, CORRIDOR_LENGTH + 3.0
+    # The end wall stands beyond the warning field at the path end (walls stay out of it).
+    x0, x1 = -3.0, CORRIDOR_LENGTH + 5.0
     walls = (
         WallSpec((x0, -half), (x1, -half)), WallSpec((x0, half), (x1, half)),
         WallSpec((x0, -half), (x0, half)), WallSpec((x1, -half), (x1, half)),

@@ -384,6 +384,8 @@ def check_scenario_layout(
     *,
     moves: Sequence[BoxMove] | None = None,
     clearances: Clearances | None = None,
+    world: WorldSpec | None = None,
+    robot: UGVSpec | None = None,
 ) -> None:
     """Check a scenario's world, robot, people and every lap's layout; raise :class:`SpecError`.
 
@@ -391,7 +393,9 @@ def check_scenario_layout(
     before them (:func:`check_moves`).
 
     ``moves`` defaults to ``spec.moves``; the loader passes the file's moves when a
-    ``--set laps=N`` dropped the later ones, so the whole file is checked.
+    ``--set laps=N`` dropped the later ones, so the whole file is checked. ``world`` (e.g.
+    built in code) replaces the world the scenario names and ``robot`` its robot, as
+    :class:`~scenarios.bench.testbench.Testbench` does.
 
     Examples
     --------
@@ -404,8 +408,14 @@ def check_scenario_layout(
     semistatic.errors.SpecError: ...pal3b.toml: world: not a bundled world (did you mean 'pal3'?) \
 and no such file; bundled worlds: ...
     """
-    footprint = robot_footprint(spec.robot, file=spec.source)
-    world = scenario_world(spec)
+    if robot is None:
+        footprint = robot_footprint(spec.robot, file=spec.source)
+    else:
+        footprint = np.asarray(robot.footprint, dtype=float)
+    if world is None:
+        world = scenario_world(spec)
+    else:
+        world = enable_people(world, spec.people, file=spec.source)
     check_first_lap(world, footprint=footprint, clearances=clearances)
     check_moves(
         world,

@@ -22,10 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from robots.presets import PRESETS
-from scenarios.spec.field_sizing import check_field_sizes
-from scenarios.spec.layout import check_scenario_layout, robot_preset, scenario_world
-from scenarios.spec.pieces import check_piece_sightings
-from scenarios.spec.routes import check_vehicles
+from scenarios.spec.preflight import check_scenario
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError, join_key
 from semistatic.noise import spec_noise_params
@@ -303,7 +300,9 @@ def scenario_from_toml(
     (:func:`scenarios.spec.layout.check_scenario_layout`), which loads the world, and
     every segment's protective field against the standard's formula
     (:func:`scenarios.spec.field_sizing.check_field_sizes`) and every test piece against
-    every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`).
+    every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`)
+    and every vehicle's start (:func:`scenarios.spec.starts.check_starts`): the one pass
+    of :func:`scenarios.spec.preflight.check_scenario`.
 
     Examples
     --------
@@ -331,14 +330,7 @@ def scenario_from_toml(
             spec = dataclasses.replace(spec, moves=kept)
     if check_layout:
         with _blame_overrides(file, keys):
-            check_scenario_layout(spec, moves=file_spec.moves)
-            world = scenario_world(spec)
-            if spec.vehicles:
-                check_vehicles(spec, world)
-            robots = {vehicle.robot or spec.robot for vehicle in spec.vehicles} or {spec.robot}
-            for robot in sorted(robots):
-                check_field_sizes(spec, world, robot_preset(robot, file=spec.source))
-            check_piece_sightings(spec, world)
+            check_scenario(spec, moves=file_spec.moves)
     return spec
 
 
