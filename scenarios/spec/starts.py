@@ -48,7 +48,7 @@ from scenarios.spec.routes import fleet_vehicles, vehicle_route
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
 from semistatic.frames import compose, transform_points
-from worlds.checks import build_spline, person_area, visible_posts
+from worlds.checks import build_spline, person_walk, visible_posts
 from worlds.spec import WorldSpec
 
 __all__ = ["VehicleStart", "check_starts", "landmark_noise", "start_localizer", "vehicle_starts"]
@@ -202,7 +202,8 @@ def check_starts(spec: ScenarioSpec, world: WorldSpec, robot: UGVSpec | None = N
     for start in starts:
         footprint = start.footprint()
         for index, person in enumerate(world.people):
-            if person.name in active and person_area(person).intersects(footprint):
+            if person.name in active and shapely.dwithin(person_walk(person), footprint,
+                                                        person.radius):
                 x, y, _ = start.pose
                 raise SpecError(
                     world.source, f"people[{index}]",
