@@ -52,13 +52,20 @@ def quiet_stdout() -> Iterator[None]:
     clutter the command line's output and any stdout a caller parses. Python exceptions
     are unaffected: they are raised, not printed, inside this block.
     """
-    sys.stdout.flush()
-    sys.stderr.flush()
-    try:
-        saved = [os.dup(1), os.dup(2)]
-    except OSError:  # no real descriptors (e.g. closed): nothing to protect
-        yield
-        return
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None and not stream.closed:  # None: started with it closed
+            stream.flush()
+    for descriptor in (1, 2):
+        try:
+            os.fstat(descriptor)
+        except OSError:
+            # Started with it closed: the next file opened would get its number and
+            # receive what the C library prints. Hold it with /dev/null for good.
+            held = os.open(os.devnull, os.O_WRONLY)
+            if held != descriptor:
+                os.dup2(held, descriptor)
+                os.close(held)
+    saved = [os.dup(1), os.dup(2)]
     try:
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 1)

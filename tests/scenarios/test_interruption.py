@@ -1,6 +1,8 @@
-"""Ctrl-C (SIGINT) and SIGKILL in run, table, tune and replay: the command stops promptly
-with one line and exit 130 (SIGINT), no process outlives it, an earlier good result is
-left intact and no staging directory survives the next command on the same directory.
+"""Ctrl-C (SIGINT), SIGTERM, SIGHUP and SIGKILL in run, table, tune and replay: the
+command stops promptly with one line and exit 128 + N (130 for SIGINT), no process
+outlives it, an earlier good result is left intact and no staging directory survives the
+next command on the same directory. A search (``tune --param``) stopped by any of them
+resumes: the same command again finishes the study with every grid point exactly once.
 
 Each command runs in a subprocess with stderr piped, so it prints progress lines; the
 signal is sent once its progress line (or its worker processes) shows it is working,
@@ -193,10 +195,16 @@ def _interrupted(tmp_path: Path, kind: str, signal_number: int) -> tuple[Path, s
     return out, old, process.stderr.read(), process.returncode
 
 
+STOPPING = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
+"""Signals that stop a command with one line (SIGQUIT is handled alike: test_signals.py)."""
+
+
+@pytest.mark.parametrize("signal_number", STOPPING, ids=lambda number: number.name)
 @pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
-def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, kind):
-    out, old, err, status = _interrupted(tmp_path, kind, signal.SIGINT)
-    assert status == 130, err
+def test_a_signal_stops_promptly_with_one_line_and_keeps_the_old_result(
+        tmp_path, kind, signal_number):
+    out, old, err, status = _interrupted(tmp_path, kind, signal_number)
+    assert status == 128 + signal_number, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("interrupted")
     assert (out / "metrics.json").read_text() == old
@@ -224,3 +232,80 @@ def _dead_pid() -> int:
     while _alive(pid):
         pid += 1
     return pid
+
+
+SEARCH = ["tune", "--param", "mapper.gate=0.05:0.2", "--sampler", "grid", "--grid-points",
+          "4", "--laps", "2", "--jobs", "2", "--no-figures"]
+"""A four-trial grid search on the tiny world: each trial is one short run."""
+
+GRID = [0.05, 0.1, 0.15, 0.2]
+"""The grid's values of mapper.gate (4 points from 0.05 to 0.2)."""
+
+
+def _trials(out: Path) -> list[tuple[str, float]]:
+    """Return (state, mapper.gate) of every trial of the study in ``out`` (hand-read SQL)."""
+    import sqlite3
+
+    with sqlite3.connect(out / "study.db") as database:
+        rows = database.execute(
+            "SELECT trials.state, trial_params.param_value FROM trials JOIN trial_params"
+            " ON trial_params.trial_id = trials.trial_id ORDER BY trials.number").fetchall()
+    return [(state, round(value, 9)) for state, value in rows]
+
+
+@pytest.mark.parametrize("signal_number", [*STOPPING, signal.SIGKILL],
+                         ids=lambda number: number.name)
+@pytest.mark.parametrize("backend", ["pool", "ray"])
+def test_a_stopped_search_resumes_with_every_trial_once(tmp_path, backend, signal_number):
+    if backend == "ray":
+        pytest.importorskip("ray")
+    scenario = write_tiny(tmp_path)
+    out = tmp_path / "search"
+    args = [*SEARCH[:1], str(scenario), *SEARCH[1:], "--backend", backend]
+    began = time.time()
+    process = _start(args, out, tmp_path)
+    children = _wait_until_working(process, "1/4 trials done", 0)
+    process.send_signal(signal_number)
+    _wait_stopped(process, children)
+    err = process.stderr.read()
+    if signal_number != signal.SIGKILL:
+        assert process.returncode == 128 + signal_number, err
+        assert "Traceback" not in err
+    assert _leftovers(tmp_path) == []
+    assert _no_ray_processes(began)
+    assert any(state == "COMPLETE" for state, _ in _trials(out))
+    started = time.monotonic()
+    resumed = subprocess.run(
+        [sys.executable, "-m", "scenarios", *args, "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S * 2)
+    assert resumed.returncode == 0, resumed.stderr
+    complete = sorted(value for state, value in _trials(out) if state == "COMPLETE")
+    assert complete == GRID, _trials(out)
+    assert _no_ray_processes(began)
+    print(f"resumed in {time.monotonic() - started:.1f} s")
+
+
+def _no_ray_processes(began: float) -> bool:
+    """Return whether no Ray process (raylet, GCS, dashboard, agents) the test made lives.
+
+    Ray's processes are found by their command line naming a session of Ray's that was
+    made after ``began`` (time.time()); Ray keeps them in /tmp/ray/session_*.
+    """
+    sessions = {path.name for path in Path("/tmp/ray").glob("session_2*")
+                if path.stat().st_mtime >= began} if Path("/tmp/ray").is_dir() else set()
+    deadline = time.monotonic() + WORKERS_STOP_S * 3
+    while True:
+        living = []
+        for entry in Path("/proc").iterdir():
+            if not entry.name.isdigit() or not _alive(int(entry.name)):
+                continue
+            try:
+                command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            if any(session in command for session in sessions):
+                living.append(command[:80])
+        if not living:
+            return True
+        assert time.monotonic() < deadline, f"Ray processes left: {living}"
+        time.sleep(0.2)
