@@ -38,14 +38,16 @@ __all__ = [
     "Stopped",
     "broken_stream",
     "exit_status",
+    "handlers_kept",
     "ignore_in_worker",
+    "raise_if_stopped",
     "silence_streams",
     "stop_on_signals",
     "stream_problem",
 ]
 
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
-"""Signals that stop a command the way Ctrl-C (SIGINT) does."""
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+"""Signals that stop a command: each raises :class:`Stopped` (SIGINT too, see below)."""
 
 WORKER_IGNORED_SIGNALS = (signal.SIGINT, signal.SIGHUP, signal.SIGQUIT)
 """Signals a worker process ignores: a terminal sends them to the whole process group,
@@ -86,16 +88,39 @@ def exit_status(interrupt: KeyboardInterrupt) -> int:
     return 128 + int(number)
 
 
+_received: list[int] = []
+"""Stop signals received within :func:`stop_on_signals` (a swallowed one is raised again)."""
+
+
 def _raise_stopped(signal_number: int, _frame) -> None:
+    _received.append(signal_number)
     raise Stopped(signal_number)
+
+
+def raise_if_stopped() -> None:
+    """Raise :class:`Stopped` again if a stop signal came and its exception was swallowed.
+
+    An exception raised by a signal handler while a finalizer (``__del__``, a weakref
+    callback: SQLAlchemy's, say) runs is printed as "Exception ignored" and lost, and the
+    command would go on. Called before anything is published and between the trials of a
+    search, so that a stop is never lost.
+
+    Examples
+    --------
+    >>> raise_if_stopped()  # no signal came: nothing happens
+    """
+    if _received:
+        raise Stopped(_received[-1])
 
 
 @contextlib.contextmanager
 def stop_on_signals() -> Iterator[None]:
-    """Within the block, make SIGTERM, SIGHUP and SIGQUIT raise :class:`Stopped`.
+    """Within the block, make SIGINT, SIGTERM, SIGHUP and SIGQUIT raise :class:`Stopped`.
 
-    Signals the process ignores are left ignored; outside the main thread (where Python
-    cannot handle signals) nothing changes. The earlier handlers come back at the end.
+    SIGINT too (``Stopped`` is a ``KeyboardInterrupt``), so that a Ctrl-C swallowed by a
+    finalizer is not lost either (:func:`raise_if_stopped`). Signals the process ignores
+    are left ignored; outside the main thread (where Python cannot handle signals)
+    nothing changes. The earlier handlers come back at the end.
 
     Examples
     --------
@@ -108,16 +133,56 @@ def stop_on_signals() -> Iterator[None]:
     >>> signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
     True
     """
+    _received.clear()
     earlier = {}
     if threading.current_thread() is threading.main_thread():
         for number in STOP_SIGNALS:
             if signal.getsignal(number) != signal.SIG_IGN:
                 earlier[number] = signal.signal(number, _raise_stopped)
+    hook, sys.unraisablehook = sys.unraisablehook, _quiet_about_stops(sys.unraisablehook)
     try:
         yield
     finally:
         for number, handler in earlier.items():
             signal.signal(number, handler)
+        sys.unraisablehook = hook
+        _received.clear()
+
+
+def _quiet_about_stops(hook):
+    # A Stopped raised in a finalizer is lost ("Exception ignored in ..." and a traceback
+    # on stderr): kept in _received, raised again by raise_if_stopped, never printed.
+    def unraisable(report) -> None:
+        if not isinstance(report.exc_value, Stopped):
+            hook(report)
+
+    return unraisable
+
+
+@contextlib.contextmanager
+def handlers_kept() -> Iterator[None]:
+    """Put back, at the end of the block, the handlers of :data:`STOP_SIGNALS` it changed.
+
+    Around a library's set-up that installs handlers of its own (``ray.init`` makes
+    SIGTERM exit with status 15, without our line or clean-up).
+
+    Examples
+    --------
+    >>> with handlers_kept():
+    ...     _ = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    >>> signal.getsignal(signal.SIGHUP) == signal.SIG_DFL
+    True
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    earlier = {number: signal.getsignal(number) for number in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for number, handler in earlier.items():
+            if handler is not None:
+                signal.signal(number, handler)
 
 
 def ignore_in_worker() -> None:

@@ -37,6 +37,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+from scenarios.process.signals import raise_if_stopped
 from semistatic.errors import SpecError
 from semistatic.validation import loads_json
 
@@ -168,6 +169,7 @@ def stage_and_publish(out: Path, fill: Callable[[Path], None]) -> None:
                                     dir=out.parent))
     try:
         fill(staging)
+        raise_if_stopped()  # a stop signal whose exception a finalizer swallowed
         (staging / RESULT_MARKER).write_text("written by semistatic; replaced as a whole\n")
         if out.exists():
             previous = Path(tempfile.mkdtemp(prefix=f".{out.name}.previous-{os.getpid()}-",

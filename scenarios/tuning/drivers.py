@@ -22,20 +22,13 @@ from typing import Any
 
 import optuna
 
+from scenarios.process.reaper import start_time
+
 __all__ = ["DRIVER_ATTR", "driver_gone", "driver_identity", "fail_orphaned_trials"]
 
 DRIVER_ATTR = "semistatic_driver"
 """Trial system attribute naming the driver that runs it (:func:`driver_identity`)."""
 RUNNING = optuna.trial.TrialState.RUNNING
-
-
-def _start_time(pid: int) -> int | None:
-    """Return when process ``pid`` started (clock ticks since boot, /proc), ``None`` if gone."""
-    try:
-        stat = open(f"/proc/{pid}/stat").read()  # noqa: SIM115 (one short read)
-    except OSError:
-        return None
-    return int(stat[stat.rindex(")") + 2 :].split()[19])
 
 
 def driver_identity() -> dict[str, Any]:
@@ -49,7 +42,7 @@ def driver_identity() -> dict[str, Any]:
     >>> identity["pid"] == os.getpid(), driver_gone(identity)
     (True, False)
     """
-    return {"host": socket.gethostname(), "pid": os.getpid(), "started": _start_time(os.getpid())}
+    return {"host": socket.gethostname(), "pid": os.getpid(), "started": start_time(os.getpid())}
 
 
 def driver_gone(identity: Any) -> bool:
@@ -69,7 +62,7 @@ def driver_gone(identity: Any) -> bool:
         return False
     if not isinstance(identity.get("pid"), int) or not isinstance(identity.get("started"), int):
         return False
-    return _start_time(identity["pid"]) != identity["started"]
+    return start_time(identity["pid"]) != identity["started"]
 
 
 def fail_orphaned_trials(study: optuna.Study, storage: optuna.storages.RDBStorage,

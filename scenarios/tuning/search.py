@@ -8,12 +8,11 @@ trial's runs of each ``--objective`` (several make a multi-objective study with 
 front). Every trial keeps its full metrics, per run, in the study's user attributes, with
 the worst case and the spread (robust thresholds: rank by either).
 
-The study lives in an Optuna RDB storage (by default ``DIR/study.db``, SQLite). The
-driver records its identity (:mod:`scenarios.tuning.drivers`) and heartbeats on every
-trial it runs. A trial left running by a stopped driver (any signal, a crash) is failed
-and queued again with the same values (Optuna's ``RetryHeartbeatStaleTrialCallback``):
-at once if its driver ran on this host, else once its heartbeat is ``GRACE_S`` old. So
-re-running the same command finishes the study: no trial is run twice, lost or doubled.
+The study lives in an Optuna RDB storage (default ``DIR/study.db``, SQLite). The driver
+records itself (:mod:`scenarios.tuning.drivers`) and heartbeats on each trial it runs; a
+trial a stopped driver left running is failed and queued again with the same values
+(``RetryHeartbeatStaleTrialCallback``): at once if its driver ran on this host, else once
+its heartbeat is ``GRACE_S`` old. Re-running the command finishes the study, exactly.
 
 Examples
 --------
@@ -39,6 +38,7 @@ from typing import Any
 import numpy as np
 import optuna
 
+from scenarios.process.signals import raise_if_stopped
 from scenarios.tuning.drivers import DRIVER_ATTR, driver_identity, fail_orphaned_trials
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value
 from scenarios.tuning.params import PARAM_OPTION, SearchParam, grid_size
@@ -369,6 +369,7 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
     while True:
         # Reading the study and recording heartbeats are database round trips: once per
         # HEARTBEAT_S, or when a trial was told (the workers share the CPUs with us).
+        raise_if_stopped()  # a stop signal whose exception a finalizer swallowed
         due = time.monotonic() - beat >= HEARTBEAT_S
         if changed or due:
             optuna.storages.fail_stale_trials(study)

@@ -59,12 +59,27 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _descendants(pid: int) -> set[int]:
+    """Return the ids of the live descendants of ``pid`` (children, theirs, ...)."""
+    found, todo = set(), [pid]
+    while todo:
+        children = _children(todo.pop())
+        todo.extend(children - found)
+        found |= children
+    return found
+
+
 def _alive(pid: int) -> bool:
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return False
     return stat[stat.rindex(")") + 2] != "Z"
+
+
+RAY_STOP_S = 15.0
+"""Longest wait for Ray's processes to stop once the driver stopped: its agents notice
+the raylet's end by polling (measured: all gone within 8 s of a SIGKILLed driver)."""
 
 
 def _corridor_log(path: Path, passes: int) -> Path:
@@ -159,8 +174,9 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _wait_stopped(process: subprocess.Popen, workers: set[int]) -> None:
-    """Wait for ``process`` to end, then for ``workers`` within ``WORKERS_STOP_S``.
+def _wait_stopped(process: subprocess.Popen, workers: set[int],
+                  allowed_s: float = WORKERS_STOP_S) -> None:
+    """Wait for ``process`` to end, then for ``workers`` within ``allowed_s``.
 
     ``wait`` rather than ``communicate``: reading stderr to its end would also wait for
     the workers, which hold it open, and hide how long they outlived their parent.
@@ -169,7 +185,7 @@ def _wait_stopped(process: subprocess.Popen, workers: set[int]) -> None:
         process.wait(timeout=STOP_TIMEOUT_S)
     finally:
         process.kill()
-    deadline = time.monotonic() + WORKERS_STOP_S
+    deadline = time.monotonic() + allowed_s
     while any(_alive(pid) for pid in workers):
         assert time.monotonic() < deadline, f"processes outlived their parent: {workers}"
         time.sleep(0.05)
@@ -262,17 +278,18 @@ def test_a_stopped_search_resumes_with_every_trial_once(tmp_path, backend, signa
     scenario = write_tiny(tmp_path)
     out = tmp_path / "search"
     args = [*SEARCH[:1], str(scenario), *SEARCH[1:], "--backend", backend]
-    began = time.time()
     process = _start(args, out, tmp_path)
-    children = _wait_until_working(process, "1/4 trials done", 0)
+    _wait_until_working(process, "1/4 trials done", 0)
+    # Every process the command made: the pool's workers, or Ray's GCS server, raylet,
+    # dashboard and runtime-env agents (children of the raylet) and workers.
+    family = _descendants(process.pid)
     process.send_signal(signal_number)
-    _wait_stopped(process, children)
+    _wait_stopped(process, family, RAY_STOP_S if backend == "ray" else WORKERS_STOP_S)
     err = process.stderr.read()
     if signal_number != signal.SIGKILL:
         assert process.returncode == 128 + signal_number, err
         assert "Traceback" not in err
     assert _leftovers(tmp_path) == []
-    assert _no_ray_processes(began)
     assert any(state == "COMPLETE" for state, _ in _trials(out))
     started = time.monotonic()
     resumed = subprocess.run(
@@ -281,31 +298,4 @@ def test_a_stopped_search_resumes_with_every_trial_once(tmp_path, backend, signa
     assert resumed.returncode == 0, resumed.stderr
     complete = sorted(value for state, value in _trials(out) if state == "COMPLETE")
     assert complete == GRID, _trials(out)
-    assert _no_ray_processes(began)
     print(f"resumed in {time.monotonic() - started:.1f} s")
-
-
-def _no_ray_processes(began: float) -> bool:
-    """Return whether no Ray process (raylet, GCS, dashboard, agents) the test made lives.
-
-    Ray's processes are found by their command line naming a session of Ray's that was
-    made after ``began`` (time.time()); Ray keeps them in /tmp/ray/session_*.
-    """
-    sessions = {path.name for path in Path("/tmp/ray").glob("session_2*")
-                if path.stat().st_mtime >= began} if Path("/tmp/ray").is_dir() else set()
-    deadline = time.monotonic() + WORKERS_STOP_S * 3
-    while True:
-        living = []
-        for entry in Path("/proc").iterdir():
-            if not entry.name.isdigit() or not _alive(int(entry.name)):
-                continue
-            try:
-                command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if any(session in command for session in sessions):
-                living.append(command[:80])
-        if not living:
-            return True
-        assert time.monotonic() < deadline, f"Ray processes left: {living}"
-        time.sleep(0.2)

@@ -154,3 +154,20 @@ def test_sigquit_stops_a_run_with_131_and_keeps_the_old_result(tmp_path: Path):
     assert (out / "metrics.json").read_text() == "{}"
     assert sorted(path.name for path in tmp_path.iterdir()) == ["out", "tiny.toml",
                                                                "tiny_world.toml"]
+
+
+class _SignalsWhenCollected:
+    def __del__(self) -> None:
+        signal.raise_signal(signal.SIGHUP)  # as when a signal lands in SQLAlchemy's __del__
+
+
+def test_a_stop_swallowed_by_a_finalizer_is_raised_again_and_not_printed(capfd):
+    from scenarios.process.signals import raise_if_stopped
+
+    with stop_on_signals():
+        _SignalsWhenCollected()  # collected at once: the handler raises inside __del__
+        with pytest.raises(Stopped) as stopped:
+            raise_if_stopped()
+    assert stopped.value.signal_number == signal.SIGHUP
+    assert capfd.readouterr().err == ""  # no "Exception ignored in ..." traceback
+    raise_if_stopped()  # outside the block: forgotten
