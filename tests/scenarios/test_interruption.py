@@ -225,6 +225,7 @@ def test_a_signal_stops_promptly_with_one_line_and_keeps_the_old_result(
     assert err.strip().splitlines()[-1].startswith("interrupted")
     assert (out / "metrics.json").read_text() == old
     assert _leftovers(tmp_path) == []
+    _next_command_succeeds(tmp_path, out, old)
 
 
 @pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
@@ -233,6 +234,11 @@ def test_sigkill_leaves_no_process_and_the_next_command_cleans_up(tmp_path, kind
     assert (out / "metrics.json").read_text() == old
     # A staging directory a killed run left behind (it may have been killed mid-write).
     (tmp_path / f".results.staging-{_dead_pid()}-x").mkdir()
+    _next_command_succeeds(tmp_path, out, old)
+
+
+def _next_command_succeeds(tmp_path: Path, out: Path, old: str) -> None:
+    """Check that a command on ``out`` succeeds, leaves no staging and the old result."""
     check = subprocess.run(
         [sys.executable, "-m", "scenarios", "check", "sim1", "--out", str(out)],
         cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S,
