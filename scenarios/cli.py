@@ -9,24 +9,29 @@ ends with status 2 and one line ``error: <file or option>: <key>: <what is wrong
 before any work starts and before anything is written; a full disk or a refused
 permission while writing also ends with status 2 and one ``error:`` line (the previous
 result whole); a run whose lap cannot complete exits with 1; Ctrl-C exits with 130 and
-one line.
+one line, SIGTERM, SIGHUP and SIGQUIT with 128 + N and the same line
+(:mod:`scenarios.process.signals`); a closed stdout or stderr ends the command with 141
+(one line on stderr when stderr is still open), no traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.metadata
 import os
 import sys
 from collections.abc import Sequence
 
 from scenarios.commands import campaign, compare, evaluate, falsify, replay, run, tune
-from scenarios.process.errors import (
-    EXIT_BAD_INPUT,
-    EXIT_INTERRUPTED,
-    InputError,
-    check_jobs,
-    write_failure,
+from scenarios.process.errors import EXIT_BAD_INPUT, InputError, check_jobs, write_failure
+from scenarios.process.signals import (
+    EXIT_BROKEN_STREAM,
+    broken_stream,
+    exit_status,
+    silence_streams,
+    stop_on_signals,
+    stream_problem,
 )
 from semistatic.errors import SpecError, caused_by_interrupt
 
@@ -72,6 +77,29 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "evaluate": evaluate.main_evaluate, "campaign": campaign.main_campaign,
                 "compare": compare.main_compare, "falsify": falsify.main_falsify}
     try:
+        with stop_on_signals():
+            return _run_command(args, handlers)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, or a stop signal (signals.Stopped)
+        return _interrupted(exit_status(interrupt))
+    except SystemError as error:
+        # Ctrl-C while numba unpickles a cached kernel reaches us as a SystemError
+        # ("returned a result with an exception set") caused by the KeyboardInterrupt.
+        if not caused_by_interrupt(error):
+            raise
+        cause = error
+        while not isinstance(cause, KeyboardInterrupt):
+            cause = cause.__cause__ or cause.__context__
+        return _interrupted(exit_status(cause))
+    except (OSError, ValueError, AttributeError) as error:
+        if not broken_stream(error):
+            raise
+        return _broken_stream()
+
+
+def _run_command(args: argparse.Namespace, handlers: dict) -> int:
+    if stream_problem() is not None:
+        return _broken_stream()  # before any work: nothing it shows could be read
+    try:
         if getattr(args, "jobs", None) is not None:
             # Now, before the kernel compilation below forks workers of its own: a --jobs
             # out of range must not start a process before it is refused.
@@ -86,24 +114,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (SpecError, InputError) as error:
         print("error: " + _one_line(str(error)), file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("interrupted; earlier results are left as they were", file=sys.stderr)
-        return EXIT_INTERRUPTED
     except OSError as error:
         # A full disk or a refused permission while writing (staging is removed on the
-        # way out of stage_and_publish); any other OSError is a fault to see whole.
+        # way out of stage_and_publish); any other OSError (a broken stdout's EPIPE
+        # among them, handled by main) is a fault to see whole.
         line = write_failure(error)
         if line is None:
             raise
         print("error: " + _one_line(line), file=sys.stderr)
         return EXIT_BAD_INPUT
-    except SystemError as error:
-        # Ctrl-C while numba unpickles a cached kernel reaches us as a SystemError
-        # ("returned a result with an exception set") caused by the KeyboardInterrupt.
-        if not caused_by_interrupt(error):
-            raise
+
+
+def _interrupted(status: int) -> int:
+    try:
         print("interrupted; earlier results are left as they were", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except (OSError, ValueError, AttributeError):
+        return _broken_stream()
+    return status
+
+
+def _broken_stream() -> int:
+    problem = stream_problem() or "stdout"
+    if problem != "stderr":
+        # BrokenPipeError too: stderr may be the pipe that broke; then nothing is shown.
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            print(f"error: {problem}: is closed; stopped (what was not published yet is "
+                  "discarded, earlier results are left as they were)", file=sys.stderr)
+    silence_streams()
+    return EXIT_BROKEN_STREAM
 
 
 def _one_line(message: str) -> str:
@@ -126,9 +164,10 @@ def _one_line(message: str) -> str:
 def console_main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``semistatic`` command: :func:`main`, then exit with its status.
 
-    After Ctrl-C the interpreter's own teardown is skipped (``os._exit``, once the output
-    is flushed and every result staged or cleaned up by :func:`main`): an interrupt that
-    lands while numba loads or compiles a kernel can leave a half-built llvmlite object
+    After Ctrl-C, a stop signal or a closed stream the interpreter's own teardown is
+    skipped (``os._exit``, once the output is flushed and every result staged or cleaned
+    up by :func:`main`): an interrupt that lands while numba loads or compiles a kernel
+    can leave a half-built llvmlite object
     whose destructor then frees memory twice at exit (seen as "free(): double free
     detected" after the one ``interrupted`` line).
 
@@ -143,8 +182,9 @@ def console_main(argv: Sequence[str] | None = None) -> None:
     exit status 0
     """
     status = main(argv)
-    if status == EXIT_INTERRUPTED:
-        sys.stdout.flush()
-        sys.stderr.flush()
+    if status > 128:  # 128 + N: stopped by signal N, or by a closed stream (SIGPIPE's)
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            sys.stdout.flush()
+            sys.stderr.flush()
         os._exit(status)
     sys.exit(status)

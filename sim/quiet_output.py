@@ -52,13 +52,11 @@ def quiet_stdout() -> Iterator[None]:
     (True, True)
     """
     with _QUIET_LOCK:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        try:
-            saved = [os.dup(1), os.dup(2)]
-        except OSError:  # no real descriptors (e.g. closed): nothing to protect
-            yield
-            return
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None and not stream.closed:  # None: started with it closed
+                stream.flush()
+        _hold_closed_descriptors()
+        saved = [os.dup(1), os.dup(2)]
         try:
             with open(os.devnull, "w") as devnull:
                 os.dup2(devnull.fileno(), 1)
@@ -69,3 +67,16 @@ def quiet_stdout() -> Iterator[None]:
             for descriptor, copy in zip((1, 2), saved, strict=True):
                 os.dup2(copy, descriptor)
                 os.close(copy)
+
+
+def _hold_closed_descriptors() -> None:
+    # A process started with 1 or 2 closed: the next file opened would get its number and
+    # receive what the C library prints. Hold it with /dev/null for good.
+    for descriptor in (1, 2):
+        try:
+            os.fstat(descriptor)
+        except OSError:
+            held = os.open(os.devnull, os.O_WRONLY)
+            if held != descriptor:
+                os.dup2(held, descriptor)
+                os.close(held)

@@ -46,6 +46,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from scenarios.process.errors import WRITE_ERRNOS
+from scenarios.process.signals import raise_if_stopped
 from semistatic.errors import SpecError
 from semistatic.validation import loads_json
 
@@ -253,6 +254,7 @@ def stage_and_publish(out: Path, fill: Callable[[Path], None], *, command: str) 
     try:
         try:
             fill(staging)
+            raise_if_stopped()  # a stop signal whose exception a finalizer swallowed
             write_result_marker(staging, command)
         except OSError as error:
             if error.filename is not None or error.errno not in WRITE_ERRNOS:

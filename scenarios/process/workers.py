@@ -1,10 +1,11 @@
 """Worker processes that stop with their parent: Ctrl-C, a crash or a SIGKILL.
 
-``table`` and ``tune`` run scenarios in worker processes. Workers ignore SIGINT (a
-Ctrl-C in a terminal reaches the whole process group): the parent alone decides, and on
-an interruption or an error it terminates them at once instead of letting them finish
-their runs or print tracebacks. A parent killed with SIGKILL cannot do that, so every
-worker watches its parent and exits within ``PARENT_POLL_S`` when it is gone.
+``table`` and ``tune`` run scenarios in worker processes. Workers ignore SIGINT, SIGHUP
+and SIGQUIT (a terminal sends them to the whole process group): the parent alone decides
+(:mod:`scenarios.process.signals`), and on an interruption, a stop signal or an error it
+terminates them at once instead of letting them finish their runs or print tracebacks.
+A parent killed with SIGKILL cannot do that, so every worker watches its parent and
+exits within ``PARENT_POLL_S`` when it is gone.
 
 Examples
 --------
@@ -19,10 +20,11 @@ import contextlib
 import multiprocessing
 import multiprocessing.pool
 import os
-import signal
 import threading
 import time
 from collections.abc import Iterator
+
+from scenarios.process.signals import ignore_in_worker
 
 __all__ = ["PARENT_POLL_S", "worker_pool"]
 
@@ -37,7 +39,7 @@ def _exit_with_parent(parent: int) -> None:
 
 
 def _init_worker(parent: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    ignore_in_worker()
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True).start()
 
 

@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any
 
 from scenarios.logs.recording import Recording, read_recording
 from scenarios.logs.recording_replay import replay_recording, replay_setting
+from scenarios.process.reaper import start_reaper
+from scenarios.process.signals import handlers_kept
 from scenarios.process.workers import worker_pool
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
@@ -337,10 +339,15 @@ class RayBackend:
             # or the tasks of a node would compete for its cores.
             single = {"env_vars": {name: "1" for name in SINGLE_THREAD_VARIABLES}}
             if self.address is None:
-                ray.init(num_cpus=self.jobs, include_dashboard=False, log_to_driver=False,
-                         configure_logging=False, runtime_env=single)
-            else:
-                ray.init(address=self.address, log_to_driver=False, runtime_env=single)
+                # Ray's GCS server, raylet and agents would outlive a SIGKILLed driver.
+                start_reaper()
+            # Ray's own SIGTERM handler exits with 15 at once: ours unwinds (shutdown below).
+            with handlers_kept():
+                if self.address is None:
+                    ray.init(num_cpus=self.jobs, include_dashboard=False, log_to_driver=False,
+                             configure_logging=False, runtime_env=single)
+                else:
+                    ray.init(address=self.address, log_to_driver=False, runtime_env=single)
         cpus = int(ray.cluster_resources().get("CPU", self.jobs))
         self.capacity = cpus if self.address is not None else self.jobs
         self._remote = ray.remote(num_cpus=1, max_retries=0)(run_points)

@@ -8,11 +8,11 @@ trial's runs of each ``--objective`` (several make a multi-objective study with 
 front). Every trial keeps its full metrics, per run, in the study's user attributes, with
 the worst case and the spread (robust thresholds: rank by either).
 
-The study lives in an Optuna RDB storage (by default ``DIR/study.db``, SQLite). The
-driver records a heartbeat for every trial it runs; a trial left running by a killed
-driver goes stale after ``GRACE_S`` and is failed and queued again with the same values
-(Optuna's ``RetryHeartbeatStaleTrialCallback``), so re-running the same command finishes
-the study: no finished trial runs again, none is lost or doubled.
+The study lives in an Optuna RDB storage (default ``DIR/study.db``, SQLite). The driver
+records itself (:mod:`scenarios.tuning.drivers`) and heartbeats on each trial it runs; a
+trial a stopped driver left running is failed and queued again with the same values
+(``RetryHeartbeatStaleTrialCallback``): at once if its driver ran on this host, else once
+its heartbeat is ``GRACE_S`` old. Re-running the command finishes the study, exactly.
 
 Examples
 --------
@@ -38,6 +38,8 @@ from typing import Any
 import numpy as np
 import optuna
 
+from scenarios.process.signals import raise_if_stopped
+from scenarios.tuning.drivers import DRIVER_ATTR, driver_identity, fail_orphaned_trials
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value
 from scenarios.tuning.params import PARAM_OPTION, SearchParam, grid_size
 from scenarios.tuning.points import sweep_points
@@ -358,6 +360,7 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
     ``objectives`` and ``objective_values(metrics)``.
     """
     distributions = config.distributions()
+    identity = driver_identity()
     inflight: dict[int, tuple[optuna.trial.Trial, list]] = {}
     ran = 0
     beat = -math.inf  # when the driver last recorded heartbeats (time.monotonic)
@@ -366,9 +369,11 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
     while True:
         # Reading the study and recording heartbeats are database round trips: once per
         # HEARTBEAT_S, or when a trial was told (the workers share the CPUs with us).
+        raise_if_stopped()  # a stop signal whose exception a finalizer swallowed
         due = time.monotonic() - beat >= HEARTBEAT_S
         if changed or due:
             optuna.storages.fail_stale_trials(study)
+            fail_orphaned_trials(study, storage, own=inflight.keys())
             trials = study.get_trials(deepcopy=False)
             finished = sum(1 for trial in trials if _is_finished(trial))
             running = [trial for trial in trials if trial.state == optuna.trial.TrialState.RUNNING
@@ -394,6 +399,7 @@ def run_study(study: optuna.Study, storage: optuna.storages.RDBStorage, config: 
             # At once: a running trial without a heartbeat is never taken for stale, so
             # one asked just before the driver dies would hold a resumed study forever.
             storage.record_heartbeat(trial._trial_id)
+            storage.set_trial_system_attr(trial._trial_id, DRIVER_ATTR, identity)
             free -= 1
             changed = True
             try:

@@ -1,6 +1,8 @@
-"""Ctrl-C (SIGINT) and SIGKILL in run, table, tune and replay: the command stops promptly
-with one line and exit 130 (SIGINT), no process outlives it, an earlier good result is
-left intact and no staging directory survives the next command on the same directory.
+"""Ctrl-C (SIGINT), SIGTERM, SIGHUP and SIGKILL in run, table, tune and replay: the
+command stops promptly with one line and exit 128 + N (130 for SIGINT), no process
+outlives it, an earlier good result is left intact and no staging directory survives the
+next command on the same directory. A search (``tune --param``) stopped by any of them
+resumes: the same command again finishes the study with every grid point exactly once.
 
 Each command runs in a subprocess with stderr piped, so it prints progress lines; the
 signal is sent once its progress line (or its worker processes) shows it is working,
@@ -57,12 +59,27 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _descendants(pid: int) -> set[int]:
+    """Return the ids of the live descendants of ``pid`` (children, theirs, ...)."""
+    found, todo = set(), [pid]
+    while todo:
+        children = _children(todo.pop())
+        todo.extend(children - found)
+        found |= children
+    return found
+
+
 def _alive(pid: int) -> bool:
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return False
     return stat[stat.rindex(")") + 2] != "Z"
+
+
+RAY_STOP_S = 15.0
+"""Longest wait for Ray's processes to stop once the driver stopped: its agents notice
+the raylet's end by polling (measured: all gone within 8 s of a SIGKILLed driver)."""
 
 
 def _corridor_log(path: Path, passes: int) -> Path:
@@ -157,8 +174,9 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _wait_stopped(process: subprocess.Popen, workers: set[int]) -> None:
-    """Wait for ``process`` to end, then for ``workers`` within ``WORKERS_STOP_S``.
+def _wait_stopped(process: subprocess.Popen, workers: set[int],
+                  allowed_s: float = WORKERS_STOP_S) -> None:
+    """Wait for ``process`` to end, then for ``workers`` within ``allowed_s``.
 
     ``wait`` rather than ``communicate``: reading stderr to its end would also wait for
     the workers, which hold it open, and hide how long they outlived their parent.
@@ -167,7 +185,7 @@ def _wait_stopped(process: subprocess.Popen, workers: set[int]) -> None:
         process.wait(timeout=STOP_TIMEOUT_S)
     finally:
         process.kill()
-    deadline = time.monotonic() + WORKERS_STOP_S
+    deadline = time.monotonic() + allowed_s
     while any(_alive(pid) for pid in workers):
         assert time.monotonic() < deadline, f"processes outlived their parent: {workers}"
         time.sleep(0.05)
@@ -193,14 +211,21 @@ def _interrupted(tmp_path: Path, kind: str, signal_number: int) -> tuple[Path, s
     return out, old, process.stderr.read(), process.returncode
 
 
+STOPPING = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
+"""Signals that stop a command with one line (SIGQUIT is handled alike: test_signals.py)."""
+
+
+@pytest.mark.parametrize("signal_number", STOPPING, ids=lambda number: number.name)
 @pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
-def test_ctrl_c_stops_promptly_with_one_line_and_keeps_the_old_result(tmp_path, kind):
-    out, old, err, status = _interrupted(tmp_path, kind, signal.SIGINT)
-    assert status == 130, err
+def test_a_signal_stops_promptly_with_one_line_and_keeps_the_old_result(
+        tmp_path, kind, signal_number):
+    out, old, err, status = _interrupted(tmp_path, kind, signal_number)
+    assert status == 128 + signal_number, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("interrupted")
     assert (out / "metrics.json").read_text() == old
     assert _leftovers(tmp_path) == []
+    _next_command_succeeds(tmp_path, out, old)
 
 
 @pytest.mark.parametrize("kind", ["run", "table", "tune", "replay"])
@@ -209,6 +234,11 @@ def test_sigkill_leaves_no_process_and_the_next_command_cleans_up(tmp_path, kind
     assert (out / "metrics.json").read_text() == old
     # A staging directory a killed run left behind (it may have been killed mid-write).
     (tmp_path / f".results.staging-{_dead_pid()}-x").mkdir()
+    _next_command_succeeds(tmp_path, out, old)
+
+
+def _next_command_succeeds(tmp_path: Path, out: Path, old: str) -> None:
+    """Check that a command on ``out`` succeeds, leaves no staging and the old result."""
     check = subprocess.run(
         [sys.executable, "-m", "scenarios", "check", "sim1", "--out", str(out)],
         cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S,
@@ -224,3 +254,54 @@ def _dead_pid() -> int:
     while _alive(pid):
         pid += 1
     return pid
+
+
+SEARCH = ["tune", "--param", "mapper.gate=0.05:0.2", "--sampler", "grid", "--grid-points",
+          "4", "--laps", "2", "--jobs", "2", "--no-figures"]
+"""A four-trial grid search on the tiny world: each trial is one short run."""
+
+GRID = [0.05, 0.1, 0.15, 0.2]
+"""The grid's values of mapper.gate (4 points from 0.05 to 0.2)."""
+
+
+def _trials(out: Path) -> list[tuple[str, float]]:
+    """Return (state, mapper.gate) of every trial of the study in ``out`` (hand-read SQL)."""
+    import sqlite3
+
+    with sqlite3.connect(out / "study.db") as database:
+        rows = database.execute(
+            "SELECT trials.state, trial_params.param_value FROM trials JOIN trial_params"
+            " ON trial_params.trial_id = trials.trial_id ORDER BY trials.number").fetchall()
+    return [(state, round(value, 9)) for state, value in rows]
+
+
+@pytest.mark.parametrize("signal_number", [*STOPPING, signal.SIGKILL],
+                         ids=lambda number: number.name)
+@pytest.mark.parametrize("backend", ["pool", "ray"])
+def test_a_stopped_search_resumes_with_every_trial_once(tmp_path, backend, signal_number):
+    if backend == "ray":
+        pytest.importorskip("ray")
+    scenario = write_tiny(tmp_path)
+    out = tmp_path / "search"
+    args = [*SEARCH[:1], str(scenario), *SEARCH[1:], "--backend", backend]
+    process = _start(args, out, tmp_path)
+    _wait_until_working(process, "1/4 trials done", 0)
+    # Every process the command made: the pool's workers, or Ray's GCS server, raylet,
+    # dashboard and runtime-env agents (children of the raylet) and workers.
+    family = _descendants(process.pid)
+    process.send_signal(signal_number)
+    _wait_stopped(process, family, RAY_STOP_S if backend == "ray" else WORKERS_STOP_S)
+    err = process.stderr.read()
+    if signal_number != signal.SIGKILL:
+        assert process.returncode == 128 + signal_number, err
+        assert "Traceback" not in err
+    assert _leftovers(tmp_path) == []
+    assert any(state == "COMPLETE" for state, _ in _trials(out))
+    started = time.monotonic()
+    resumed = subprocess.run(
+        [sys.executable, "-m", "scenarios", *args, "--out", str(out)],
+        cwd=tmp_path, capture_output=True, text=True, timeout=START_TIMEOUT_S * 2)
+    assert resumed.returncode == 0, resumed.stderr
+    complete = sorted(value for state, value in _trials(out) if state == "COMPLETE")
+    assert complete == GRID, _trials(out)
+    print(f"resumed in {time.monotonic() - started:.1f} s")
