@@ -38,7 +38,7 @@ TIMEOUT_S = 300  # generous: the machine is shared; a FIFO that blocked would hi
 
 
 def _flaser(beams: int) -> str:
-    ranges = " ".join(["1.5"] * beams)
+    ranges = " ".join(["1"] * beams)
     return f"FLASER {beams} {ranges} 0 0 0 0 0 0 1.0 host 1.0\n"
 
 
@@ -163,10 +163,13 @@ def _hostile_cases(folder: Path) -> dict[str, tuple[list[str], str]]:
         stream.truncate(4 << 30)  # 4 GiB, sparse: costs no disk
     with open(folder / "huge.log", "wb") as stream:
         stream.truncate(4 << 30)
-    # A gzip bomb: 512 MiB of zeros, compressed to ~0.5 MB, written in chunks.
-    with gzip.open(folder / "bomb.log.gz", "wb", compresslevel=1) as stream:
-        for _ in range(512):
-            stream.write(bytes(1 << 20))
+    # Gzip bombs of 512 MiB, compressed to ~0.5 MB, written in chunks: zeros (one endless
+    # line) and 1 KiB comment lines (every line short, the whole too long).
+    comments = (b"#" * 1023 + b"\n") * 1024
+    for name, chunk in (("bomb.log.gz", bytes(1 << 20)), ("lines.log.gz", comments)):
+        with gzip.open(folder / name, "wb", compresslevel=1) as stream:
+            for _ in range(512):
+                stream.write(chunk)
     (folder / "wide.log").write_text(_flaser(100_000))
     for name, body in (("boxes.toml", _boxes(100_000)), ("boxes_1001.toml", _boxes(1001))):
         (folder / name).write_text(_world_with(body))
@@ -190,7 +193,9 @@ def _hostile_cases(folder: Path) -> dict[str, tuple[list[str], str]]:
         "4 GiB scenario": (["check", "huge.toml"], "more than the limit of 1.0 MiB"),
         "4 GiB world": (["check", "on_huge.toml"], "more than the limit of 1.0 MiB"),
         "4 GiB log": (["evaluate", "huge.log"], "more than the limit of 64.0 MiB"),
-        "gzip bomb": (["evaluate", "bomb.log.gz"], "limit"),
+        "gzip bomb of zeros": (["evaluate", "bomb.log.gz"], "line 1: longer than 262144"),
+        "gzip bomb of lines": (["evaluate", "lines.log.gz"],
+                               "decompresses to more than the limit of 64.0 MiB"),
         "100k beams": (["evaluate", "wide.log"], "more than the limit of 8192"),
         "10^5 boxes": (["check", "on_boxes.toml"], "more than the limit of 1.0 MiB"),
         "1001 boxes": (["check", "on_boxes_1001.toml"], "more than the limit of 1000"),
