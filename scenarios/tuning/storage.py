@@ -18,8 +18,8 @@ Examples
 >>> check_storage(f"sqlite:///{mine}")  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-semistatic.errors.SpecError: --storage: ...mine.db: is a database of another program \
-(tables: notes), not an Optuna storage; name a new file
+semistatic.errors.SpecError: --storage: sqlite:///...mine.db: ...mine.db is a database of \
+another program (tables: notes), not an Optuna storage; name a new file
 >>> check_storage(f"sqlite:///{pathlib.Path(folder.name) / 'new.db'}")
 >>> folder.cleanup()
 """
@@ -83,8 +83,8 @@ def check_storage(url: str) -> None:
     >>> check_storage("sqlite:////dev/zero")
     Traceback (most recent call last):
     ...
-    semistatic.errors.SpecError: --storage: /dev/zero: is a character device, expected a \
-regular SQLite file
+    semistatic.errors.SpecError: --storage: sqlite:////dev/zero: is a character device, \
+expected a regular SQLite file
     """
     path = _sqlite_file(url)
     if path is None:
@@ -92,23 +92,23 @@ regular SQLite file
     if not path.exists():
         parent = path.parent if str(path.parent) else Path(".")
         if not parent.is_dir():
-            raise SpecError(STORAGE_OPTION, str(path), f"its directory {parent} does not "
-                            "exist; create it or name another file")
+            raise SpecError(STORAGE_OPTION, url, f"cannot open the storage: its directory "
+                            f"{parent} does not exist; create it or name another file")
         if _read_only(parent):
-            raise SpecError(STORAGE_OPTION, str(path), f"its directory {parent} is "
-                            "read-only; name a file in a writable directory")
+            raise SpecError(STORAGE_OPTION, url, f"cannot open the storage: its directory "
+                            f"{parent} is read-only; name a file in a writable directory")
         return
     size = check_regular_file(path, limit=MAX_STORAGE_BYTES, what="SQLite file",
-                              file=STORAGE_OPTION, key=str(path))
+                              file=STORAGE_OPTION, key=url)
     if _read_only(path) or _read_only(path.parent if str(path.parent) else Path(".")):
-        raise SpecError(STORAGE_OPTION, str(path), "is read-only (the file or its "
+        raise SpecError(STORAGE_OPTION, url, f"{path} is read-only (the file or its "
                         "directory): a study must write its trials; copy it somewhere "
                         "writable")
     if size == 0:
         return
     with open(path, "rb") as stream:
         if stream.read(len(SQLITE_MAGIC)) != SQLITE_MAGIC:
-            raise SpecError(STORAGE_OPTION, str(path), "is not an SQLite database; name a "
+            raise SpecError(STORAGE_OPTION, url, f"{path} is not an SQLite database; name a "
                             "new file for the study")
     uri = f"file:{urllib.parse.quote(str(path.resolve()))}?mode=ro"
     try:
@@ -116,9 +116,9 @@ regular SQLite file
             tables = {row[0] for row in database.execute(
                 "SELECT name FROM sqlite_master WHERE type = 'table'")}
     except sqlite3.DatabaseError as error:
-        raise SpecError(STORAGE_OPTION, str(path), f"cannot read the SQLite database "
+        raise SpecError(STORAGE_OPTION, url, f"cannot read the SQLite database "
                         f"({error}); name a new file for the study") from None
     if tables and not tables >= OPTUNA_TABLES:
         listed = ", ".join(sorted(tables)[:5]) + (", ..." if len(tables) > 5 else "")
-        raise SpecError(STORAGE_OPTION, str(path), f"is a database of another program "
+        raise SpecError(STORAGE_OPTION, url, f"{path} is a database of another program "
                         f"(tables: {listed}), not an Optuna storage; name a new file")
