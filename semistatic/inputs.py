@@ -60,12 +60,13 @@ MIB = 1 << 20
 
 MAX_SPEC_BYTES = 1 * MIB
 """Largest world or scenario TOML file: the largest bundled one (``worlds/data/warehouse``,
-9.5 kB) a hundred times over, a world of a few thousand boxes. tomllib needs about ten
-times a file's size while parsing, so a file at the limit costs ~10 MB."""
+9.5 kB) a hundred times over, room for the 1000 boxes a world may have (about 70 bytes
+each); a file at the limit parses in a fraction of a second."""
 
 MAX_JSON_BYTES = 16 * MIB
-"""Largest JSON manifest (a recording's ``manifest.json``): a five-lap recording's is
-about 20 kB (the layouts, segments and metrics), a thousand-lap one stays below 4 MB."""
+"""Largest JSON manifest (a recording's ``manifest.json``): a two-lap recording of the
+test world's is 3.6 kB (segments, box layouts and the metrics, which grow with the laps),
+so this is thousands of times a real one."""
 
 MAX_LOG_BYTES = 64 * MIB
 """Largest laser log, on disk and decompressed: the largest real log we evaluate
@@ -77,8 +78,9 @@ MAX_LINE_BYTES = 256 * 1024
 beams with one remission each is ~100 kB; the longest real line is 2.2 kB (csail)."""
 
 MAX_RECORDING_BYTES = 1024 * MIB
-"""Largest ``scans.npz`` of a recording: a five-lap pal1 recording is ~10 MB (541-beam
-float64 scans), so this holds some five hundred laps."""
+"""Largest ``scans.npz`` of a recording: a scan of 541 beams takes 4.6 kB (a two-lap run
+of the test world: 387 scans, 1.8 MB), so this holds about 230,000 scans, hundreds of
+laps of the bundled scenarios."""
 
 _CHUNK = MIB
 """Bytes read from a decompressor at a time: the most a bounded read overshoots by."""
