@@ -228,3 +228,16 @@ def test_every_hostile_input_is_refused_in_one_line_within_twice_the_memory(tmp_
     assert sorted(path.name for path in tmp_path.iterdir()) == before
     assert sorted(path.name for path in (tmp_path / "rec").iterdir()) == ["manifest.json"]
     print(f"peak RSS KiB: reference {reference}, hostile {peaks}")
+
+
+def test_a_laser_with_more_beams_than_a_scan_may_have_is_refused_by_its_spec():
+    import dataclasses
+    import math
+
+    from robots.lasers import LMS100
+
+    # 360 deg at 0.01 deg: 36,001 beams; check must refuse what a Scan would refuse mid-run.
+    with pytest.raises(SpecError, match=f"gives 36001 beams over the fov, more than the limit "
+                       f"of {MAX_BEAMS}"):
+        dataclasses.replace(LMS100, fov=math.radians(360), angular_resolution=math.radians(0.01))
+    assert LMS100.num_beams == 541 <= MAX_BEAMS
