@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from semistatic.errors import MEMORY, SpecError
+from semistatic.types import MAX_BEAMS
 from semistatic.validation import bounds, check_fields
 
 __all__ = [
@@ -147,6 +148,13 @@ class LaserSpec:
                 MEMORY,
                 "range_min",
                 f"must be < range_max ({self.range_max} m), got {self.range_min}",
+            )
+        if self.num_beams > MAX_BEAMS:  # a Scan refuses more: check, not the run, says so
+            raise SpecError(
+                MEMORY,
+                "angular_resolution",
+                f"gives {self.num_beams} beams over the fov, more than the limit of "
+                f"{MAX_BEAMS} a scan may have; use a coarser resolution",
             )
 
     @property

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike
 
 from semistatic.frames import transform_points
 
-__all__ = ["Scan", "beam_angles", "beam_directions"]
+__all__ = ["MAX_BEAMS", "Scan", "beam_angles", "beam_directions"]
 
 
 @functools.lru_cache(maxsize=32)
@@ -67,6 +67,13 @@ def beam_directions(
     return directions
 
 
+MAX_BEAMS = 8192
+"""Most beams a scan may have. Real 2D lasers have a few thousand at most (a SICK LMS511
+at 1/6 deg over 190 deg: 1141, a nanoScan3: 1650, a 360 deg scanner at 0.125 deg: 2880;
+the logs we evaluate 180-361, the simulated S300 541); the mapper's cost grows faster
+than the beam count, and 100,000 beams asked for 49.6 GiB."""
+
+
 @dataclass(frozen=True, eq=False)
 class Scan:
     """One 2D laser scan, ROS ``LaserScan``-like, in SI units.
@@ -99,6 +106,9 @@ class Scan:
 
     def __post_init__(self) -> None:
         ranges = np.array(self.ranges, dtype=np.float64).reshape(-1)
+        if ranges.size > MAX_BEAMS:
+            raise ValueError(f"Scan: {ranges.size} beams, more than the limit of {MAX_BEAMS} "
+                             "(real 2D lasers have a few thousand at most)")
         ranges.flags.writeable = False
         object.__setattr__(self, "ranges", ranges)
         if self.intensities is not None:

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from semistatic.errors import MEMORY, SpecError, join_key
+from semistatic.inputs import FILE_KEY, MAX_SPEC_BYTES, read_bounded
 
 __all__ = [
     "FILE_KEY",
@@ -78,8 +79,6 @@ __all__ = [
     "unlimited",
 ]
 
-FILE_KEY = "<file>"
-"""The key reported for problems with the file as a whole (missing, unreadable)."""
 
 SUGGESTION_CUTOFF = 0.6
 """difflib similarity above which a known name is offered as "did you mean"."""
@@ -668,14 +667,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     semistatic.errors.SpecError: /no/such/world.toml: <file>: no such file
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise SpecError(str(path), FILE_KEY, "no such file") from None
-    except IsADirectoryError:
-        raise SpecError(str(path), FILE_KEY, "is a directory, expected a .toml file") from None
-    except OSError as error:
-        raise SpecError(str(path), FILE_KEY, f"cannot read: {error.strerror}") from None
+    # A regular file of at most MAX_SPEC_BYTES, checked before it is opened (a FIFO).
+    raw = read_bounded(path, limit=MAX_SPEC_BYTES, what=".toml file")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as error:

@@ -58,6 +58,8 @@ __all__ = [
     "BOX_SIZE",
     "COORDINATE",
     "FIELD_POINT",
+    "MAX_ITEMS",
+    "MAX_VERTICES",
     "TEST_PIECE_KINDS",
     "TEST_PIECE_SIZES",
     "TRIGGERS",
@@ -107,6 +109,22 @@ START_TIME = bounds(ge=0.0, le=86_400.0)
 
 LAP_NUMBER = bounds(ge=1, le=1000)
 """A lap of a run, counted from 1 (scenarios run at most 1000 laps)."""
+
+MAX_ITEMS = 1000
+"""Most walls, posts, boxes, people or test pieces a world may have (each kind): the
+largest bundled world (warehouse) has 10 walls, 40 posts, 5 boxes; the layout checks
+compare every pair, so 10^5 boxes kept `check` busy for minutes."""
+
+MAX_VERTICES = 10_000
+"""Most points of one list: the path's knots, a person's waypoints, a field polygon (the
+bundled worlds have at most a few dozen; a spline through 10,000 knots is a 10 km path)."""
+
+
+def _check_count(items: Any, limit: int, key: str) -> None:
+    """Refuse more than ``limit`` entries in ``items``, before each is looked at."""
+    if len(items) > limit:
+        raise SpecError(MEMORY, key, f"has {len(items)} entries, more than the limit of "
+                        f"{limit}; split the world or simplify it")
 
 
 def _set(obj: object, name: str, value: Any) -> None:
@@ -469,6 +487,7 @@ got [3, 2]
     laps: tuple[int, ...] = field(default=(), metadata=LAP_NUMBER)
 
     def __post_init__(self) -> None:
+        _check_count(self.waypoints, MAX_VERTICES, "waypoints")
         check_fields(self)
         if any(later <= earlier for earlier, later in itertools.pairwise(self.laps)):
             raise SpecError(MEMORY, "laps", "must list laps in ascending order, each once, "
@@ -553,6 +572,8 @@ warning field (0.045 m2 of it sticks out); shrink protective or widen warning
     protective: tuple[Point, ...] = field(metadata=FIELD_POINT)
 
     def __post_init__(self) -> None:
+        _check_count(self.warning, MAX_VERTICES, "warning")
+        _check_count(self.protective, MAX_VERTICES, "protective")
         check_fields(self)
         if self.end_knot <= self.start_knot:
             raise SpecError(
@@ -628,6 +649,8 @@ class PathSpec:
     closed: bool = False
 
     def __post_init__(self) -> None:
+        _check_count(self.knots, MAX_VERTICES, "knots")
+        _check_count(self.segments, MAX_VERTICES, "segments")
         check_fields(self)
         knots = self.knots
         if len(knots) < 2:
@@ -755,6 +778,8 @@ radii 0.04 + 0.04 m)
     source: str = MEMORY
 
     def __post_init__(self) -> None:
+        for name in ("walls", "posts", "boxes", "people", "test_pieces"):
+            _check_count(getattr(self, name), MAX_ITEMS, name)
         check_fields(self)
         for name in ("walls", "posts", "boxes", "people", "test_pieces"):
             _set(self, name, tuple(getattr(self, name)))

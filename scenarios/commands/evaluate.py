@@ -126,6 +126,9 @@ def main_evaluate(args: argparse.Namespace) -> int:
         scans = list(itertools.islice(open_log(args.log), 0, None, args.every))
     except ValueError as error:  # LogFormatError, BagError
         raise SpecError(str(args.log), "<file>", str(error)) from None
+    if not any(scan.valid_mask().any() for scan in scans):  # before any score is printed
+        raise SpecError(str(args.log), "<file>", f"no valid range in any of its {len(scans)} "
+                        "scans (all NaN, inf or beyond the maximum range); nothing to evaluate")
     sigma = estimate_range_noise(scans[:NOISE_SCANS], REPLAY_PARAMS.max_range)
     params = noise_params(REPLAY_PARAMS, sigma)
     print(f"{name}: {len(scans)} scans (one in {args.every}), range noise "
@@ -135,6 +138,10 @@ def main_evaluate(args: argparse.Namespace) -> int:
         print("  " + score_row(method, *points[0]))
     ours = at_default["default"][0][1]
     vertices = ours.vertices_per_scan
+    if vertices == 0.0:  # as replay says it: nothing to compare the pipelines on
+        raise SpecError(str(args.log), "<file>", f"no polyline in any of its {len(scans)} "
+                        "scans (are all ranges NaN, inf or beyond the maximum range?); "
+                        "nothing to evaluate")
     paper_epsilon, paper = at_vertex_count(scans, params, vertices, method="paper")
     print(f"  paper's pipeline at equal vertex count ({paper.vertices_per_scan:.1f}/scan, "
           f"tolerance {100 * paper_epsilon:.2f} cm): RMSE {100 * paper.rmse:.2f} cm; the "

@@ -47,10 +47,19 @@ import numpy as np
 from scenarios.bench.observer import Observer, VehicleView
 from scenarios.bench.policies import policy_name
 from scenarios.bench.records import LapLog, ScanRecord
+from scenarios.logs.recording_checks import (
+    MANIFEST,
+    RECORDING_OPTION,
+    SCANS,
+    check_manifest,
+    file_digest,
+    read_scans,
+)
 from scenarios.process.staging import check_writable_parent
 from scenarios.spec.layout import lap_worlds
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
+from semistatic.inputs import MAX_JSON_BYTES, read_bounded
 from semistatic.validation import loads_json
 
 __all__ = [
@@ -67,8 +76,9 @@ __all__ = [
 ]
 
 FORMAT = "semistatic-recording"
-FORMAT_VERSION = 1
-"""Raised whenever the layout of ``manifest.json`` or ``scans.npz`` changes incompatibly."""
+FORMAT_VERSION = 2
+"""Raised whenever the layout of ``manifest.json`` or ``scans.npz`` changes incompatibly
+(2: the manifest holds the scan and beam counts and the sha256 of ``scans.npz``)."""
 
 MAPPER_SECTIONS = ("mapper",)
 """Scenario fields a replay may change: they reach only the mapper, never the motion."""
@@ -76,9 +86,6 @@ MAPPER_SECTIONS = ("mapper",)
 IGNORED_FIELDS = ("source",)
 """Scenario fields that say where a spec came from, not what it runs."""
 
-MANIFEST = "manifest.json"
-SCANS = "scans.npz"
-RECORDING_OPTION = "--recording"
 
 
 def digest(value: Any) -> str:
@@ -242,12 +249,16 @@ class ScanRecorder(Observer):
             "layouts": self._layouts,
             "lap_layouts": self._lap_layouts,
             "metrics": metrics,
+            "scans": int(arrays["ranges"].shape[0]),
+            "beams": int(arrays["ranges"].shape[1]) if arrays["ranges"].ndim == 2 else 0,
         }
         directory.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{directory.name}.staging-",
                                         dir=directory.parent))
         try:
             np.savez(staging / SCANS, **arrays)
+            # The reader checks it: a scans.npz edited or swapped afterwards is refused.
+            manifest["scans_sha256"] = file_digest(staging / SCANS)
             (staging / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
             os.rename(staging, directory)
         except BaseException:
@@ -337,17 +348,19 @@ def read_recording(path: str | os.PathLike[str]) -> Recording:
 (no manifest.json); make one with `semistatic run SCENARIO --record DIR`
     """
     path = Path(path)
-    try:
-        manifest = loads_json((path / MANIFEST).read_text(), file=RECORDING_OPTION, key=MANIFEST)
-    except FileNotFoundError:
+    if not (path / MANIFEST).exists():
         raise SpecError(
             RECORDING_OPTION, MANIFEST,
             f"{path} is not a recording (no {MANIFEST}); make one with "
             "`semistatic run SCENARIO --record DIR`",
-        ) from None
+        )
+    raw = read_bounded(path / MANIFEST, limit=MAX_JSON_BYTES, what="recording manifest",
+                       file=RECORDING_OPTION, key=MANIFEST)
+    try:
+        manifest = loads_json(raw.decode("utf-8"), file=RECORDING_OPTION, key=MANIFEST)
     except SpecError:
         raise  # nested too deep: already one line naming --recording (a ValueError too)
-    except (OSError, ValueError) as error:
+    except ValueError as error:  # not UTF-8, not JSON
         raise SpecError(RECORDING_OPTION, MANIFEST, f"cannot read {path / MANIFEST}: {error}") \
             from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
@@ -356,13 +369,8 @@ def read_recording(path: str | os.PathLike[str]) -> Recording:
         raise SpecError(
             RECORDING_OPTION, "format_version",
             f"{path} has format version {manifest.get('format_version')!r} (written by "
-            f"semistatic {manifest.get('project_version')}); this version reads "
+            f"semistatic {manifest.get('project_version')!r}); this version reads "
             f"{FORMAT_VERSION}: record it again",
         )
-    try:
-        with np.load(path / SCANS, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-    except (OSError, ValueError) as error:
-        raise SpecError(RECORDING_OPTION, SCANS, f"cannot read {path / SCANS}: {error}") \
-            from None
-    return Recording(path, manifest, arrays)
+    check_manifest(manifest, path)
+    return Recording(path, manifest, read_scans(path, manifest))

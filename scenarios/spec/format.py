@@ -132,6 +132,12 @@ coordinates are metres in the world frame, field polygons metres in the robot fr
   letters, digits, `_`, `-` or `.`, starting with a letter or digit.
 - Numbers must be finite; `nan` and `inf` are refused everywhere. Unknown keys are refused
   with a "did you mean".
+- Limits (each refused with one line naming the file, the key and the limit, before the
+  file is parsed or the items are checked): a scenario or world file is a regular file
+  (not a FIFO, a device or a directory) of at most 1 MiB; a world has at most 1000 walls,
+  posts, boxes, people and test pieces each, and at most 10,000 path knots, segments,
+  waypoints of a person or points of a field polygon; arrays and tables nest at most 64
+  levels deep.
 """
 
 

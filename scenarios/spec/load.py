@@ -128,10 +128,10 @@ occlusion_hall, pal1, pal3a, pal3b, sim1, sim2, warehouse, warehouse_fleet, ware
     if isinstance(name_or_path, str) and text in names:
         return DATA_DIR / f"{text}.toml"
     path = Path(name_or_path)
-    if path.is_file():
-        return path
     if path.is_dir():
         raise SpecError(text, FILE_KEY, "is a directory, expected a scenario .toml file")
+    if path.exists():  # read_toml refuses what is not a regular file (a FIFO, a device)
+        return path
     if path.suffix == "" and "/" not in text:
         raise SpecError(
             text,

@@ -17,6 +17,7 @@ SearchParam(key='mapper.gate', low=0.05, high=0.2, log=False, integer=False, cho
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -27,13 +28,26 @@ import optuna
 from scenarios.spec.load import parse_override
 from semistatic.errors import SpecError
 
-__all__ = ["PARAM_OPTION", "SearchParam", "parse_param", "parse_params"]
+__all__ = [
+    "MAX_GRID_POINTS", "MAX_GRID_TRIALS", "PARAM_OPTION", "SearchParam", "parse_param",
+    "parse_params",
+]
 
 PARAM_OPTION = "--param"
 """The ``file`` named in errors about search parameters."""
 
 GRID_DIGITS = 10
 """Decimals kept of a float grid value (so ``0.15`` is not written ``0.15000000000000002``)."""
+
+GRID_POINTS_OPTION = "--grid-points"
+
+MAX_GRID_POINTS = 1000
+"""Most values ``--grid-points`` takes of a range: the bundled studies use 5; a thousand
+values of one threshold are finer than any run's noise tells apart, and each is a trial."""
+
+MAX_GRID_TRIALS = 100_000
+"""Most combinations a grid may have: each is a trial (a replay or a run); a hundred
+thousand replays of a recording take days on a workstation."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +115,9 @@ class SearchParam:
         """
         if self.choices is not None:
             return self.choices
+        if points > MAX_GRID_POINTS:  # before linspace allocates them
+            raise SpecError(GRID_POINTS_OPTION, "grid_points", f"must be <= {MAX_GRID_POINTS} "
+                            f"(values of one range), got {points}")
         if self.integer:
             values = np.unique(np.round(
                 np.geomspace(self.low, self.high, points) if self.log
@@ -180,4 +197,9 @@ def grid_size(params: Sequence[SearchParam], points: int) -> int:
     >>> grid_size(parse_params(["mapper.gate=0.1:0.2", "mapper.outlier_k=2,3"]), 3)
     6
     """
-    return int(np.prod([len(param.grid_values(points)) for param in params]))
+    size = math.prod(len(param.grid_values(points)) for param in params)
+    if size > MAX_GRID_TRIALS:
+        raise SpecError(GRID_POINTS_OPTION, "grid_points", f"the grid has {size} points, more "
+                        f"than the limit of {MAX_GRID_TRIALS} trials; use fewer --grid-points "
+                        "or fewer --param, or a sampler (--sampler tpe)")
+    return size

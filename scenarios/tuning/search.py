@@ -44,6 +44,7 @@ from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_
 from scenarios.tuning.params import PARAM_OPTION, SearchParam, grid_size
 from scenarios.tuning.points import sweep_points
 from scenarios.tuning.run import PointResult, RecordingSet
+from scenarios.tuning.storage import check_storage
 from semistatic.errors import SpecError
 from semistatic.validation import did_you_mean
 
@@ -282,6 +283,7 @@ def open_study(config: SearchConfig, url: str, name: str,
     or another search with its ``sampler_object(resumed)``, ``fingerprint()``,
     ``directions()`` and ``grid_trials()``.
     """
+    check_storage(url)  # before Optuna adds its tables to a foreign or read-only database
     storage = _check_storage_url(url)
     if name in optuna.study.get_all_study_names(storage):
         study = optuna.load_study(study_name=name, storage=storage)

@@ -1,4 +1,4 @@
-r"""Stream laser scans out of CARMEN log files (plain text or gzip).
+r"""Stream laser scans out of CARMEN log files (plain text, gzip, bz2 or xz).
 
 CARMEN logs are text, one message per line. Two laser records are read:
 
@@ -38,19 +38,21 @@ array([ 1.,  2., inf,  3.])
 
 from __future__ import annotations
 
-import gzip
+import contextlib
+import lzma
 import math
 import os
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
+from semistatic.errors import SpecError
 from semistatic.frames import wrap_angle
-from semistatic.types import Scan
+from semistatic.inputs import MAX_LOG_BYTES, bounded_lines, check_regular_file, open_bounded
+from semistatic.types import MAX_BEAMS, Scan
 
 __all__ = [
     "LogFormatError",
@@ -84,7 +86,6 @@ FLASER_ANGLES = {
 }
 # How many error messages a lenient ReadStats keeps (the count is always exact).
 MAX_KEPT_MESSAGES = 20
-GZIP_MAGIC = b"\x1f\x8b"
 
 
 class LogFormatError(ValueError):
@@ -236,14 +237,18 @@ def read_carmen(
     >>> folder.cleanup()
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"{path}: no such CARMEN log file")
+    try:  # before anything opens it: a FIFO blocks the open, /dev/zero never ends
+        check_regular_file(path, limit=MAX_LOG_BYTES, what="log")
+    except SpecError as error:
+        raise LogFormatError(str(error)) from None
     if max_range is not None and not max_range > 0:
         raise ValueError(f"read_carmen: max_range must be > 0 m or None, got {max_range}")
     if max_range is None:
         try:
             no_return = infer_no_return(path)
-        except (EOFError, OSError, zlib.error) as error:
+        except (EOFError, OSError, zlib.error, lzma.LZMAError) as error:
             raise LogFormatError(
                 f"{path}: cannot read the file ({error}); is it a complete log?"
             ) from error
@@ -286,7 +291,7 @@ def _scan_stream(
                     continue
                 stats.scans += 1
                 yield scan
-        except (EOFError, OSError, zlib.error) as error:
+        except (EOFError, OSError, zlib.error, lzma.LZMAError) as error:
             # A truncated or corrupt .gz file fails while decompressing, not while parsing.
             raise LogFormatError(
                 f"{path}:{number + 1}: cannot read the file ({error}); is it a complete log?"
@@ -303,14 +308,19 @@ class _RecordError(Exception):
     """What is wrong with one record; the caller adds file and line."""
 
 
-def _open_text(path: Path) -> TextIO:
-    with path.open("rb") as probe:
-        compressed = probe.read(2) == GZIP_MAGIC
-    # latin-1 decodes every byte, so stray binary garbage surfaces as a non-numeric
-    # field with a line number rather than a UnicodeDecodeError.
-    if compressed:
-        return gzip.open(path, "rt", encoding="latin-1")
-    return path.open("r", encoding="latin-1")
+@contextlib.contextmanager
+def _open_text(path: Path) -> Iterator[Iterator[str]]:
+    """Yield the lines of ``path``, decompressed when gzip/bz2/xz, within the limits.
+
+    At most ``MAX_LOG_BYTES`` on disk and decompressed and ``MAX_LINE_BYTES`` a line
+    (:mod:`semistatic.inputs`): a gzip bomb or a file without line breaks is refused
+    before it fills the memory. Its SpecError becomes a :class:`LogFormatError`.
+    """
+    try:
+        with open_bounded(path, limit=MAX_LOG_BYTES, what="log") as stream:
+            yield bounded_lines(stream, file=str(path))
+    except SpecError as error:
+        raise LogFormatError(str(error)) from None
 
 
 def _floats(tokens: list[str], what: str) -> np.ndarray:
@@ -352,6 +362,12 @@ def _count(tokens: list[str], index: int, record: str, what: str) -> int:
     return value
 
 
+def _check_beams(beams: int, record: str) -> None:
+    if beams > MAX_BEAMS:
+        raise _RecordError(f"{record}: {beams} beams, more than the limit of {MAX_BEAMS} "
+                           "(real 2D lasers have a few thousand at most)")
+
+
 def _check_length(tokens: list[str], expected: int, record: str, beams: int) -> None:
     if len(tokens) < expected:
         raise _RecordError(
@@ -376,6 +392,7 @@ def _parse_flaser(tokens: list[str], limit: float) -> Scan:
     beams = _count(tokens, 1, "FLASER", "beam count")
     if beams < 2:
         raise _RecordError(f"FLASER: wrong beam count, need >= 2 beams, got {beams}")
+    _check_beams(beams, "FLASER")
     _check_length(tokens, 2 + beams + FLASER_TRAILING_FIELDS, "FLASER", beams)
     ranges = _floats(tokens[2 : 2 + beams], "FLASER range")
     tail = 2 + beams
@@ -397,6 +414,7 @@ def _parse_flaser(tokens: list[str], limit: float) -> Scan:
 
 def _parse_robotlaser1(tokens: list[str], limit: float | None) -> Scan:
     beams = _count(tokens, 1 + ROBOTLASER1_CONFIG_FIELDS, "ROBOTLASER1", "beam count")
+    _check_beams(beams, "ROBOTLASER1")
     remissions_at = 2 + ROBOTLASER1_CONFIG_FIELDS + beams
     remissions = _count(tokens, remissions_at, "ROBOTLASER1", "remission count")
     expected = remissions_at + 1 + remissions + ROBOTLASER1_TRAILING_FIELDS

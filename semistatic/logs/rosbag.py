@@ -95,7 +95,9 @@ from semistatic.colours import (
     STATUS_COLOURS,
     Colour,
 )
+from semistatic.errors import SpecError
 from semistatic.frames import compose, inverse, wrap_angle
+from semistatic.inputs import check_regular_file
 from semistatic.types import Scan
 
 __all__ = [
@@ -167,6 +169,9 @@ LATCHED = Qos(
 )
 # The frame tree walk gives up after this many static hops (guards against cycles).
 MAX_TF_HOPS = 16
+MAX_BAG_BYTES = 64 << 30
+"""Largest ROS 1 bag file: bags are streamed message by message, so this only refuses
+what no recording of a 2D laser reaches (a day of 40 Hz 1081-beam scans is ~15 GB)."""
 
 
 class BagError(ValueError):
@@ -540,14 +545,19 @@ def read_bag(
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such bag (a ROS 1 .bag file or a ROS 2 directory)")
+    if not path.is_dir():  # a FIFO or a device would block or never end
+        try:
+            check_regular_file(path, limit=MAX_BAG_BYTES, what="ROS bag")
+        except SpecError as error:
+            raise BagError(str(error)) from None
     if not max_pose_gap >= 0:
         raise ValueError(f"read_bag: max_pose_gap must be >= 0 s, got {max_pose_gap}")
     with _open_reader(path) as reader:
         scan_topic = _pick_topic(path, reader, LASER_SCAN, scan_topic, None, "scan_topic")
         odom_topic = _pick_topic(path, reader, ODOMETRY, odom_topic, ODOM_TOPIC, "odom_topic")
         trajectory = _read_trajectory(path, reader, odom_topic)
-        scan_frame = _first_frame_id(reader, scan_topic)
-        offset = _static_offset(reader, trajectory.child_frame, scan_frame)
+        scan_frame = _first_frame_id(path, reader, scan_topic)
+        offset = _static_offset(path, reader, trajectory.child_frame, scan_frame)
     if offset is None:
         warnings.warn(
             f"{path}: /tf_static does not link {trajectory.child_frame!r} (from {odom_topic}) "
@@ -641,11 +651,32 @@ def _frame_name(frame_id: str) -> str:
     return frame_id.lstrip("/")  # ROS 1 bags often write "/base_link"
 
 
-def _read_trajectory(path: Path, reader: AnyReader, topic: str) -> _Trajectory:
+def _messages(path: Path, reader: AnyReader, topic: str) -> Iterator[tuple[Any, int, Any]]:
+    """Yield ``(connection, bag_time, message)`` of ``topic``, deserialized.
+
+    A corrupt bag (bytes flipped in an MCAP chunk, a garbage message in a db3) fails
+    inside rosbags with whatever its decoder raises (struct.error, IndexError,
+    UnicodeDecodeError, a decompressor's error...): that third-party boundary is the one
+    place any of them becomes one :class:`BagError` naming the file and the topic.
+    """
     connections = [c for c in reader.connections if c.topic == topic]
+    stream = reader.messages(connections=connections)
+    while True:
+        try:
+            connection, bag_time, raw = next(stream)
+            message = reader.deserialize(raw, connection.msgtype)
+        except StopIteration:
+            return
+        except Exception as error:  # see above: rosbags' decoders raise anything
+            reason = " ".join(str(error).split()) or type(error).__name__
+            raise BagError(f"{path}: {topic}: corrupt message ({reason}); is the bag "
+                           "complete?") from None
+        yield connection, bag_time, message
+
+
+def _read_trajectory(path: Path, reader: AnyReader, topic: str) -> _Trajectory:
     stamps, poses, child = [], [], ""
-    for connection, bag_time, raw in reader.messages(connections=connections):
-        message = reader.deserialize(raw, connection.msgtype)
+    for _, bag_time, message in _messages(path, reader, topic):
         pose = message.pose.pose
         stamps.append(_stamp_seconds(message.header, bag_time))
         poses.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
@@ -659,24 +690,21 @@ def _read_trajectory(path: Path, reader: AnyReader, topic: str) -> _Trajectory:
     return _Trajectory(np.array(stamps, dtype=np.float64)[order], poses_array, child)
 
 
-def _first_frame_id(reader: AnyReader, topic: str) -> str:
-    connections = [c for c in reader.connections if c.topic == topic]
-    for connection, _, raw in reader.messages(connections=connections):
-        return _frame_name(reader.deserialize(raw, connection.msgtype).header.frame_id)
+def _first_frame_id(path: Path, reader: AnyReader, topic: str) -> str:
+    for _, _, message in _messages(path, reader, topic):
+        return _frame_name(message.header.frame_id)
     return ""
 
 
-def _static_offset(reader: AnyReader, base_frame: str, laser_frame: str) -> np.ndarray | None:
+def _static_offset(path: Path, reader: AnyReader, base_frame: str,
+                   laser_frame: str) -> np.ndarray | None:
     """Return the laser pose in the base frame from ``/tf_static``, or None if unlinked."""
     if laser_frame == base_frame:
         return np.zeros(3)
     parents: dict[str, tuple[str, np.ndarray]] = {}
-    connections = [
-        c for c in reader.connections if c.topic == TF_STATIC_TOPIC and c.msgtype == TF_MESSAGE
-    ]
-    if connections:
-        for connection, _, raw in reader.messages(connections=connections):
-            for transform in reader.deserialize(raw, connection.msgtype).transforms:
+    if any(c.topic == TF_STATIC_TOPIC and c.msgtype == TF_MESSAGE for c in reader.connections):
+        for _, _, message in _messages(path, reader, TF_STATIC_TOPIC):
+            for transform in message.transforms:
                 t = transform.transform
                 pose = np.array([t.translation.x, t.translation.y, _yaw(t.rotation)])
                 parents[_frame_name(transform.child_frame_id)] = (
@@ -705,9 +733,7 @@ def _scan_stream(
     stats: BagStats,
 ) -> Iterator[Scan]:
     with _open_reader(path) as reader:
-        connections = [c for c in reader.connections if c.topic == topic]
-        for connection, bag_time, raw in reader.messages(connections=connections):
-            message = reader.deserialize(raw, connection.msgtype)
+        for _, bag_time, message in _messages(path, reader, topic):
             stamp = _stamp_seconds(message.header, bag_time)
             base_pose = trajectory.pose_at(stamp, max_pose_gap)
             if base_pose is None:
