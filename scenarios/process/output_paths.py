@@ -38,12 +38,14 @@ from semistatic.errors import SpecError
 
 __all__ = ["check_output_paths", "sqlite_path"]
 
-_SQLITE = "sqlite:///"
 _Paths = str | os.PathLike[str] | Iterable[str | os.PathLike[str]] | None
 
 
 def sqlite_path(url: str | None) -> Path | None:
-    """Return the file of a ``sqlite:///FILE`` storage URL, ``None`` for other storages.
+    """Return the file of an SQLite storage URL, ``None`` for other storages.
+
+    Parsed as Optuna's SQLAlchemy parses it (``sqlite:///``, ``sqlite+pysqlite:///``, a
+    query string); an in-memory database and a string that is no URL have no file.
 
     Examples
     --------
@@ -52,10 +54,18 @@ def sqlite_path(url: str | None) -> Path | None:
     >>> sqlite_path("postgresql://host/db") is None, sqlite_path("sqlite:///:memory:")
     (True, None)
     """
-    if url is None or not url.startswith(_SQLITE):
+    if url is None:
         return None
-    name = url[len(_SQLITE):].split("?", 1)[0]
-    return None if name in ("", ":memory:") else Path(name)
+    import sqlalchemy.engine  # Optuna's dependency: imported only where a storage is named
+    import sqlalchemy.exc
+
+    try:
+        parsed = sqlalchemy.engine.make_url(url)
+    except sqlalchemy.exc.ArgumentError:
+        return None  # not a URL: Optuna's own error says so
+    if parsed.get_backend_name() != "sqlite" or parsed.database in (None, "", ":memory:"):
+        return None
+    return Path(parsed.database)
 
 
 def _inside(path: Path, folder: Path) -> bool:

@@ -3,7 +3,7 @@
 A trial's driver records :func:`driver_identity` on it (a trial system attribute,
 ``DRIVER_ATTR``). A new driver on the same host fails and queues again, at once, every
 running trial whose driver ended (:func:`fail_orphaned_trials`): it need not wait the
-heartbeat's grace period (``scenarios.tuning.search.GRACE_S``), which still covers the
+heartbeat's grace period (``scenarios.tuning.storage.GRACE_S``), which still covers the
 drivers of other hosts. A process is told from a later one with the same id by its start
 time (Linux ``/proc/PID/stat``); where that is unknown only the heartbeats decide.
 

@@ -44,15 +44,12 @@ from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_
 from scenarios.tuning.params import PARAM_OPTION, SearchParam, grid_size
 from scenarios.tuning.points import sweep_points
 from scenarios.tuning.run import PointResult, RecordingSet
-from scenarios.tuning.storage import check_storage
+from scenarios.tuning.storage import HEARTBEAT_S, STORAGE_OPTION, open_storage
 from semistatic.errors import SpecError
 from semistatic.validation import did_you_mean
 
 __all__ = [
-    "GRACE_S",
-    "HEARTBEAT_S",
     "SAMPLERS",
-    "STORAGE_OPTION",
     "RejectedPoint",
     "SearchConfig",
     "finished_trials",
@@ -70,11 +67,6 @@ warnings.filterwarnings("ignore", message="Heartbeat of storage is supposed to b
 optuna.logging.set_verbosity(optuna.logging.WARNING)
 
 SAMPLERS = ("tpe", "random", "grid")
-HEARTBEAT_S = 2
-"""Seconds between heartbeats of a running trial (Optuna wants an integer)."""
-GRACE_S = 6
-"""Seconds without a heartbeat after which a running trial counts as abandoned."""
-STORAGE_OPTION = "--storage"
 OBJECTIVE_OPTION = "--objective"
 CONFIG_ATTR = "semistatic_search"
 """Study user attribute holding what defines the search (checked on resume)."""
@@ -263,17 +255,6 @@ def resumed_seed(seed: int, resumed: int) -> int:
     return int(np.random.SeedSequence([seed, resumed]).generate_state(1)[0])
 
 
-def _check_storage_url(url: str) -> optuna.storages.RDBStorage:
-    try:
-        return optuna.storages.RDBStorage(
-            url, heartbeat_interval=HEARTBEAT_S, grace_period=GRACE_S,
-            heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(),
-        )
-    except Exception as error:  # any driver/URL problem: one error line, not a traceback
-        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise SpecError(STORAGE_OPTION, url, f"cannot open the storage: {reason}") from None
-
-
 def open_study(config: SearchConfig, url: str, name: str,
                ) -> tuple[optuna.Study, optuna.storages.RDBStorage]:
     """Open study ``name`` in storage ``url`` (created when new); return it and the storage.
@@ -283,8 +264,7 @@ def open_study(config: SearchConfig, url: str, name: str,
     or another search with its ``sampler_object(resumed)``, ``fingerprint()``,
     ``directions()`` and ``grid_trials()``.
     """
-    check_storage(url)  # before Optuna adds its tables to a foreign or read-only database
-    storage = _check_storage_url(url)
+    storage = open_storage(url)
     if name in optuna.study.get_all_study_names(storage):
         study = optuna.load_study(study_name=name, storage=storage)
         stored, wanted = study.user_attrs.get(CONFIG_ATTR), config.fingerprint()

@@ -33,15 +33,27 @@ import stat
 import urllib.parse
 from pathlib import Path
 
-import sqlalchemy.engine
-import sqlalchemy.exc
+import optuna
 
+from scenarios.process.output_paths import sqlite_path
 from semistatic.errors import SpecError
 from semistatic.inputs import check_regular_file
 
-__all__ = ["MAX_STORAGE_BYTES", "OPTUNA_TABLES", "check_storage"]
+__all__ = [
+    "GRACE_S",
+    "HEARTBEAT_S",
+    "MAX_STORAGE_BYTES",
+    "OPTUNA_TABLES",
+    "STORAGE_OPTION",
+    "check_storage",
+    "open_storage",
+]
 
 STORAGE_OPTION = "--storage"
+HEARTBEAT_S = 2
+"""Seconds between heartbeats of a running trial (Optuna wants an integer)."""
+GRACE_S = 6
+"""Seconds without a heartbeat after which a running trial counts as abandoned."""
 
 OPTUNA_TABLES = frozenset({"studies", "trials", "version_info", "alembic_version"})
 """Tables every Optuna RDB storage has (of its 13): a database holding them is one."""
@@ -60,16 +72,6 @@ def _read_only(path: Path) -> bool:
     return not os.access(path, os.W_OK) or stat.S_IMODE(mode) & 0o222 == 0
 
 
-def _sqlite_file(url: str) -> Path | None:
-    try:
-        parsed = sqlalchemy.engine.make_url(url)
-    except sqlalchemy.exc.ArgumentError:
-        return None  # not a URL: Optuna's own error says so
-    if parsed.get_backend_name() != "sqlite" or parsed.database in (None, "", ":memory:"):
-        return None
-    return Path(parsed.database)
-
-
 def check_storage(url: str) -> None:
     """Raise :class:`SpecError` unless ``url`` is a storage Optuna may open and write.
 
@@ -86,7 +88,7 @@ def check_storage(url: str) -> None:
     semistatic.errors.SpecError: --storage: sqlite:////dev/zero: is a character device, \
 expected a regular SQLite file
     """
-    path = _sqlite_file(url)
+    path = sqlite_path(url)
     if path is None:
         return
     if not path.exists():
@@ -122,3 +124,27 @@ expected a regular SQLite file
         listed = ", ".join(sorted(tables)[:5]) + (", ..." if len(tables) > 5 else "")
         raise SpecError(STORAGE_OPTION, url, f"{path} is a database of another program "
                         f"(tables: {listed}), not an Optuna storage; name a new file")
+
+
+def open_storage(url: str) -> optuna.storages.RDBStorage:
+    """Return the Optuna storage at ``url``, checked first (:func:`check_storage`).
+
+    Heartbeats every ``HEARTBEAT_S``; a trial without one for ``GRACE_S`` is failed and
+    queued again. Any driver or URL problem is one :class:`SpecError` line.
+
+    Examples
+    --------
+    >>> open_storage("nosuchdb://x")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    semistatic.errors.SpecError: --storage: nosuchdb://x: cannot open the storage: ...
+    """
+    check_storage(url)  # before Optuna adds its tables to a foreign or read-only database
+    try:
+        return optuna.storages.RDBStorage(
+            url, heartbeat_interval=HEARTBEAT_S, grace_period=GRACE_S,
+            heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(),
+        )
+    except Exception as error:  # any driver/URL problem: one error line, not a traceback
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise SpecError(STORAGE_OPTION, url, f"cannot open the storage: {reason}") from None

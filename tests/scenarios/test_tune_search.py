@@ -16,7 +16,8 @@ from scenarios.spec.load import load_scenario
 from scenarios.tuning.metrics import TIMING_COLUMNS
 from scenarios.tuning.params import parse_param, parse_params
 from scenarios.tuning.run import PoolBackend, RayBackend
-from scenarios.tuning.search import GRACE_S, HEARTBEAT_S, run_study
+from scenarios.tuning.search import run_study
+from scenarios.tuning.storage import GRACE_S, HEARTBEAT_S
 from semistatic.errors import SpecError
 from tests.scenarios.cli_helpers import assert_one_error_line, kill_after_line, run_cli
 from tests.scenarios.tiny_world import write_tiny
