@@ -133,11 +133,12 @@ def test_a_worker_ignores_the_group_signals_and_obeys_sigterm():
 
 @pytest.mark.slow  # signals a subprocess that runs laps
 def test_sigquit_stops_a_run_with_131_and_keeps_the_old_result(tmp_path: Path):
+    from scenarios.process.staging import write_result_marker
     from tests.scenarios.tiny_world import write_tiny
 
     out = tmp_path / "out"
     out.mkdir()
-    (out / ".semistatic-result").write_text("earlier\n")
+    write_result_marker(out, "run")
     (out / "metrics.json").write_text("{}")
     process = subprocess.Popen(
         [sys.executable, "-m", "scenarios", "run", str(write_tiny(tmp_path)), "--laps", "2",
