@@ -49,7 +49,7 @@ from scenarios.bench.policies import policy_name
 from scenarios.bench.records import LapLog, ScanRecord
 from scenarios.process.staging import check_writable_parent
 from scenarios.spec.layout import lap_worlds
-from scenarios.spec.scenario import ScenarioSpec
+from scenarios.spec.scenario import LOADER_FIELDS, ScenarioSpec
 from semistatic.errors import SpecError
 from semistatic.validation import loads_json
 
@@ -73,7 +73,7 @@ FORMAT_VERSION = 1
 MAPPER_SECTIONS = ("mapper",)
 """Scenario fields a replay may change: they reach only the mapper, never the motion."""
 
-IGNORED_FIELDS = ("source",)
+IGNORED_FIELDS = LOADER_FIELDS
 """Scenario fields that say where a spec came from, not what it runs."""
 
 MANIFEST = "manifest.json"
