@@ -265,10 +265,7 @@ class SweepPoint:
 
 @dataclass(frozen=True)
 class ScenarioSource:
-    """A scenario file as a command read it once: its path, its table and its worlds.
-
-    ``worlds`` fills as points name worlds (by ``world`` value), so that every point of
-    every call of :func:`sweep_points` with this source runs the world read first.
+    """A scenario file as read once: its path, table and ``worlds`` (filled as points read them).
 
     Examples
     --------
@@ -359,9 +356,8 @@ def sweep_points(
     -------
     list of SweepPoint
         Every point's scenario is loaded and validated (world and box layouts included)
-        before this returns, so a bad value fails before anything runs. Each world is
-        read once and carried by the specs (:func:`~scenarios.spec.layout.with_loaded_world`):
-        the runs, in worker processes too, never read the files again.
+        before this returns, so a bad value fails before anything runs. Each world is read
+        once and carried by the specs: runs (in workers too) never read the files again.
 
     Raises
     ------
