@@ -23,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import hashlib
@@ -33,8 +34,9 @@ from pathlib import Path
 from typing import Any
 
 from scenarios.campaign.variations import VARY_OPTION, Variation
+from scenarios.spec.layout import with_loaded_world
 from scenarios.spec.load import OVERRIDE_FILE, scenario_from_toml, scenario_path
-from scenarios.spec.scenario import ScenarioSpec
+from scenarios.spec.scenario import LOADER_FIELDS, ScenarioSpec
 from scenarios.tuning.points import toml_value
 from semistatic.errors import SpecError
 from semistatic.params import MapperParams
@@ -151,7 +153,8 @@ def scenario_digest(spec: ScenarioSpec) -> str:
     (True, False)
     """
     fields = dataclasses.asdict(spec)
-    fields.pop("source")
+    for name in LOADER_FIELDS:  # where it came from: no part of what runs
+        fields.pop(name)
     if not spec.faults.active():
         # Fault-free runs keep the digests they had before faults existed.
         fields.pop("faults")
@@ -255,28 +258,35 @@ def plan_campaign(
         name = scenario_from_toml(table, file=str(path), overrides=base, check_layout=False)
         world_file = world_path(name.world)
         world_table = read_toml(world_file)
+        # The world read once here is carried by every run's spec (to the workers too).
+        worlds = {name.world: world_from_toml(world_table, file=str(world_file))}
         for policy in policies:
             for index, values in enumerate(samples):
                 texts = [f"{key}={toml_value(value)}" for key, value in values.items()
                          if by_key[key].world_path is None]
                 if any(by_key[key].world_path is not None for key in values):
-                    document = world_document(
-                        _varied_world(world_table, values, by_key, world_file.stem))
+                    varied_table = _varied_world(world_table, values, by_key, world_file.stem)
+                    document = world_document(varied_table)
                     digest = hashlib.sha256(document.encode()).hexdigest()[:12]
                     varied = worlds_dir / f"{world_file.stem}-{digest}.toml"
                     if not varied.exists():
                         worlds_dir.mkdir(parents=True, exist_ok=True)
                         varied.write_text(document)
                     texts.append(f"world={toml_value(str(varied.absolute()))}")
+                    with contextlib.suppress(SpecError):  # the check below names it
+                        worlds[str(varied.absolute())] = world_from_toml(
+                            varied_table, file=str(varied.absolute()))
                 point = [*base, *texts, f"policy={policy}"]
                 reason = None
                 try:
                     spec = scenario_from_toml(table, file=str(path), overrides=point,
                                               check_layout=False)
+                    spec = with_loaded_world(spec, worlds.get(spec.world))
                     layout = _layout_key(spec)
                     if layout not in checked:
                         try:
-                            scenario_from_toml(table, file=str(path), overrides=point)
+                            scenario_from_toml(table, file=str(path), overrides=point,
+                                               worlds=worlds)
                             checked[layout] = None
                         except SpecError as error:
                             checked[layout] = str(error)

@@ -57,7 +57,7 @@ from scenarios.logs.recording_checks import (
 )
 from scenarios.process.staging import check_writable_parent
 from scenarios.spec.layout import lap_worlds
-from scenarios.spec.scenario import ScenarioSpec
+from scenarios.spec.scenario import LOADER_FIELDS, ScenarioSpec
 from semistatic.errors import SpecError
 from semistatic.inputs import MAX_JSON_BYTES, read_bounded
 from semistatic.validation import loads_json
@@ -83,7 +83,7 @@ FORMAT_VERSION = 2
 MAPPER_SECTIONS = ("mapper",)
 """Scenario fields a replay may change: they reach only the mapper, never the motion."""
 
-IGNORED_FIELDS = ("source",)
+IGNORED_FIELDS = LOADER_FIELDS
 """Scenario fields that say where a spec came from, not what it runs."""
 
 

@@ -30,6 +30,7 @@ from typing import Any
 from robots.presets import PRESETS
 from scenarios.spec.scenario import (
     BOX_ACTIONS,
+    LOADER_FIELDS,
     MINIMUM_FIELDS,
     POLICIES,
     BoxMove,
@@ -78,7 +79,7 @@ SECTIONS = (
 )
 """The tables of the two file kinds, in the order the page lists them."""
 
-NOT_IN_FILES = ("source",)
+NOT_IN_FILES = LOADER_FIELDS
 """Fields the loaders set themselves (never keys of a file)."""
 
 CHOICES = {

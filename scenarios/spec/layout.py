@@ -53,6 +53,7 @@ __all__ = [
     "robot_footprint",
     "robot_preset",
     "scenario_world",
+    "with_loaded_world",
     "world_for_lap",
 ]
 
@@ -174,7 +175,9 @@ def enable_people(world: WorldSpec, people: Sequence[str], *, file: str = MEMORY
 
 
 def _load_world(spec: ScenarioSpec) -> WorldSpec:
-    """Load the scenario's world; a name that is no world names the scenario's ``world`` key."""
+    """Return the world ``spec`` carries for its ``world``, else read it; errors name ``world``."""
+    if spec.loaded_world is not None and spec.loaded_world[0] == spec.world:
+        return spec.loaded_world[1]
     try:
         return load_world(spec.world)
     except SpecError as error:
@@ -183,6 +186,25 @@ def _load_world(spec: ScenarioSpec) -> WorldSpec:
             message = error.message if looks_like_name else f"{spec.world}: {error.message}"
             raise SpecError(spec.source, "world", message) from None
         raise
+
+
+def with_loaded_world(spec: ScenarioSpec, world: WorldSpec | None = None) -> ScenarioSpec:
+    """Return ``spec`` carrying its world (``world``, else read now unless it carries it).
+
+    Every later use (the checks, each run, in worker processes too) takes that world
+    instead of reading the file again; a spec whose ``world`` is replaced reads its own.
+
+    Examples
+    --------
+    >>> from scenarios.spec.scenario import ScenarioSpec
+    >>> spec = with_loaded_world(ScenarioSpec("s", world="pal1"))
+    >>> spec.loaded_world[0], spec == ScenarioSpec("s", world="pal1")
+    ('pal1', True)
+    >>> _load_world(dataclasses.replace(spec, world="sim1")).name
+    'sim1'
+    """
+    world = _load_world(spec) if world is None else world
+    return dataclasses.replace(spec, loaded_world=(spec.world, world))
 
 
 def scenario_world(spec: ScenarioSpec) -> WorldSpec:

@@ -22,8 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from robots.presets import PRESETS
+from scenarios.spec.layout import with_loaded_world
 from scenarios.spec.preflight import check_scenario
-from scenarios.spec.scenario import ScenarioSpec
+from scenarios.spec.scenario import LOADER_FIELDS, ScenarioSpec
 from semistatic.errors import SpecError, join_key
 from semistatic.noise import spec_noise_params
 from semistatic.params import MapperParams
@@ -37,6 +38,7 @@ from semistatic.validation import (
     read_toml,
     reject_unknown_keys,
 )
+from worlds.spec import WorldSpec
 
 __all__ = [
     "DATA_DIR",
@@ -199,7 +201,8 @@ def _apply_overrides(
     """
     table = {key: dict(value) if isinstance(value, dict) else value for key, value in table.items()}
     settable = {name: hint for name, hint in _known_keys(ScenarioSpec).items()}
-    settable.pop("source")
+    for name in LOADER_FIELDS:
+        settable.pop(name)
     settable.pop("moves")
     settable.pop("vehicles")
     keys = []
@@ -289,6 +292,7 @@ def scenario_from_toml(
     file: str,
     overrides: Iterable[str] = (),
     check_layout: bool = True,
+    worlds: Mapping[str, WorldSpec] | None = None,
 ) -> ScenarioSpec:
     """Build a :class:`ScenarioSpec` from a parsed TOML table plus ``--set`` overrides.
 
@@ -302,7 +306,9 @@ def scenario_from_toml(
     (:func:`scenarios.spec.field_sizing.check_field_sizes`) and every test piece against
     every vehicle's safety laser (:func:`scenarios.spec.pieces.check_piece_sightings`)
     and every vehicle's start (:func:`scenarios.spec.starts.check_starts`): the one pass
-    of :func:`scenarios.spec.preflight.check_scenario`.
+    of :func:`scenarios.spec.preflight.check_scenario`. The world it loads then (or finds
+    in ``worlds``, the worlds read already by ``world`` value) is attached to the spec
+    (:func:`scenarios.spec.layout.with_loaded_world`): the runs use that one read.
 
     Examples
     --------
@@ -330,6 +336,8 @@ def scenario_from_toml(
             spec = dataclasses.replace(spec, moves=kept)
     if check_layout:
         with _blame_overrides(file, keys):
+            # The world is read here once: the checks and every run then use this read.
+            spec = with_loaded_world(spec, (worlds or {}).get(spec.world))
             check_scenario(spec, moves=file_spec.moves)
     return spec
 
@@ -342,9 +350,8 @@ def _spec_from_table(table: Mapping[str, Any], *, file: str) -> ScenarioSpec:
     """
     table = dict(table)
     mapper_table = table.pop("mapper", {})
-    spec = from_table(
-        ScenarioSpec, table, file=file, key="", fixed={"source": file, "mapper": MapperParams()}
-    )
+    fixed = {"source": file, "loaded_world": None, "mapper": MapperParams()}
+    spec = from_table(ScenarioSpec, table, file=file, key="", fixed=fixed)
     # An unknown robot keeps the plain defaults: the layout check names it.
     base = laser_mapper_params(spec) if spec.robot in PRESETS else MapperParams()
     return dataclasses.replace(spec, mapper=mapper_from_table(mapper_table, file=file, base=base))

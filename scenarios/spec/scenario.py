@@ -14,10 +14,11 @@ from dataclasses import dataclass, field, fields
 from semistatic.errors import MEMORY, SpecError
 from semistatic.params import MapperParams
 from semistatic.validation import bounds, check_fields, did_you_mean, or_object, safe_name
-from worlds.spec import BOX_SIZE, COORDINATE
+from worlds.spec import BOX_SIZE, COORDINATE, WorldSpec
 
 __all__ = [
     "BOX_ACTIONS",
+    "LOADER_FIELDS",
     "POLICIES",
     "BoxMove",
     "Faults",
@@ -44,6 +45,10 @@ MAX_START_TIME = 3600.0
 """Latest start of a fleet vehicle (s): an hour of the others driving alone."""
 
 POLICIES = ("conservative", "adaptive", "guarded")
+
+LOADER_FIELDS = ("source", "loaded_world")
+"""Fields of :class:`ScenarioSpec` the loaders set: where it came from, never keys of a file
+and no part of what a run is (fingerprints and digests leave them out)."""
 BOX_ACTIONS = ("move", "add", "remove")
 
 
@@ -367,6 +372,12 @@ class ScenarioSpec:
         mappers leave it out).
     source
         Set by the loader to the file read; not a key of the file.
+    loaded_world
+        Set by the loader: ``(world, WorldSpec)``, the world as read at the start for
+        the ``world`` value it was read for (:func:`scenarios.spec.layout.with_loaded_world`),
+        so that every run of a command (in worker processes too) uses that one read of
+        the file; ignored once ``world`` names another. Not a key of the file; left out
+        of ``==``, ``hash`` and ``repr``.
     """
 
     name: str = field(metadata=safe_name())
@@ -388,9 +399,15 @@ class ScenarioSpec:
     moves: tuple[BoxMove, ...] = ()
     vehicles: tuple[VehicleSpec, ...] = ()
     source: str = MEMORY
+    loaded_world: tuple[str, WorldSpec] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.loaded_world is not None and not (
+                isinstance(self.loaded_world, tuple) and len(self.loaded_world) == 2
+                and isinstance(self.loaded_world[1], WorldSpec)):
+            raise SpecError(MEMORY, "loaded_world", "must be (world, WorldSpec) or None; "
+                            "attach it with scenarios.spec.layout.with_loaded_world")
         # A policy object (scenarios.bench.policies.FieldPolicy) is checked when a run starts.
         if isinstance(self.policy, str) and self.policy not in POLICIES:
             raise SpecError(MEMORY, "policy", f"must be one of {', '.join(POLICIES)}")

@@ -20,20 +20,24 @@ import copy
 import itertools
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from scenarios.spec.layout import with_loaded_world
 from scenarios.spec.load import OVERRIDE_FILE, parse_override, scenario_from_toml, scenario_path
 from scenarios.spec.scenario import ScenarioSpec
 from semistatic.errors import SpecError
 from semistatic.validation import read_toml
+from worlds.spec import WorldSpec
 
 __all__ = [
     "GRID_OPTION",
     "LAPS_OPTION",
     "MAX_POINTS",
     "SEEDS_OPTION",
+    "ScenarioSource",
+    "ScenarioSources",
     "SweepPoint",
     "display_value",
     "once_per_key",
@@ -259,6 +263,53 @@ class SweepPoint:
         return " ".join([*values, f"seed={self.seed}"])
 
 
+@dataclass(frozen=True)
+class ScenarioSource:
+    """A scenario file as read once: its path, table and ``worlds`` (filled as points read them).
+
+    Examples
+    --------
+    >>> source = ScenarioSource.read("pal1")
+    >>> source.path.name, source.table["world"], source.worlds
+    ('pal1.toml', 'pal1', {})
+    >>> _ = sweep_points(source, {"mapper.gate": [0.1]})
+    >>> [world.name for world in source.worlds.values()]
+    ['pal1']
+    """
+
+    path: Path
+    table: Mapping[str, Any]
+    worlds: dict[str, WorldSpec] = field(default_factory=dict, compare=False, repr=False)
+
+    @classmethod
+    def read(cls, scenario: str | Path | ScenarioSource) -> ScenarioSource:
+        """Return the source of ``scenario`` (a bundled name or a file), read now."""
+        if isinstance(scenario, ScenarioSource):
+            return scenario
+        path = scenario_path(scenario)
+        return cls(path, read_toml(path))
+
+
+class ScenarioSources:
+    """The scenario files of one command, each read the first time it is asked for.
+
+    Examples
+    --------
+    >>> sources = ScenarioSources()
+    >>> sources("pal1") is sources("pal1")
+    True
+    """
+
+    def __init__(self) -> None:
+        self._read: dict[str | Path, ScenarioSource] = {}
+
+    def __call__(self, scenario: str | Path) -> ScenarioSource:
+        """Return the source of ``scenario``, read on the first call only."""
+        if scenario not in self._read:
+            self._read[scenario] = ScenarioSource.read(scenario)
+        return self._read[scenario]
+
+
 @contextlib.contextmanager
 def _blame_options(grid_keys: Iterable[str]) -> Iterator[None]:
     """Re-anchor a ``--set`` error at a grid key, the seed or the laps to their option."""
@@ -274,7 +325,7 @@ def _blame_options(grid_keys: Iterable[str]) -> Iterator[None]:
 
 
 def sweep_points(
-    scenario: str | Path,
+    scenario: str | Path | ScenarioSource,
     grids: Mapping[str, Sequence[Any]],
     *,
     seeds: Sequence[int] | None = None,
@@ -287,7 +338,8 @@ def sweep_points(
     Parameters
     ----------
     scenario
-        A bundled scenario name or a scenario file.
+        A bundled scenario name or a scenario file (read now), or its
+        :class:`ScenarioSource` as read already (read no more).
     grids
         ``{"section.key": values}``: the Cartesian product of all values is swept, the
         last key varying fastest.
@@ -304,7 +356,8 @@ def sweep_points(
     -------
     list of SweepPoint
         Every point's scenario is loaded and validated (world and box layouts included)
-        before this returns, so a bad value fails before anything runs.
+        before this returns, so a bad value fails before anything runs. Each world is read
+        once and carried by the specs: runs (in workers too) never read the files again.
 
     Raises
     ------
@@ -358,8 +411,8 @@ def sweep_points(
             "use fewer values or split the sweep",
         )
     base = list(overrides) + ([f"laps={laps}"] if laps is not None else [])
-    path = scenario_path(scenario)
-    table = read_toml(path)
+    source = ScenarioSource.read(scenario)
+    path, table = source.path, source.table
     # The layout check (world, robot footprint, people, every lap's boxes) is most of a
     # load's time and reads only these fields: run it once per distinct layout, exactly
     # as load_scenario does, and build the other points' specs without it.
@@ -377,8 +430,11 @@ def sweep_points(
                 layout = (spec.world, spec.robot, spec.people)
                 if layout not in checked_layouts:
                     spec = scenario_from_toml(copy.deepcopy(table), file=str(path),
-                                              overrides=point_overrides)
+                                              overrides=point_overrides, worlds=source.worlds)
                     checked_layouts.add(layout)
+                    source.worlds.setdefault(spec.world, spec.loaded_world[1])
+                else:
+                    spec = with_loaded_world(spec, source.worlds[spec.world])
             points.append(SweepPoint(len(points), settings, spec))
     return points
 

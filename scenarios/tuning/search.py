@@ -32,7 +32,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -42,7 +42,7 @@ from scenarios.process.signals import raise_if_stopped
 from scenarios.tuning.drivers import DRIVER_ATTR, driver_identity, fail_orphaned_trials
 from scenarios.tuning.metrics import DEFAULT_SORT, METRICS, NEES_TARGET, metric_value
 from scenarios.tuning.params import PARAM_OPTION, SearchParam, grid_size
-from scenarios.tuning.points import sweep_points
+from scenarios.tuning.points import ScenarioSources, sweep_points
 from scenarios.tuning.run import PointResult, RecordingSet
 from scenarios.tuning.storage import HEARTBEAT_S, STORAGE_OPTION, open_storage
 from semistatic.errors import SpecError
@@ -104,6 +104,8 @@ class SearchConfig:
     sampler_seed: int = 0
     also: tuple[str, ...] = ()
     """Further scenarios every trial runs (each with every seed): robust thresholds."""
+    sources: ScenarioSources = field(default_factory=ScenarioSources, compare=False, repr=False)
+    """The scenario files (and worlds) as read first: every trial's points reuse them."""
 
     def __post_init__(self) -> None:
         if len(set(self.scenarios)) != len(self.scenarios):
@@ -159,8 +161,8 @@ class SearchConfig:
 
     def _points(self, grids: Mapping[str, Sequence[Any]]):
         return [point for scenario in self.scenarios
-                for point in sweep_points(scenario, grids, seeds=self.seeds, laps=self.laps,
-                                          overrides=self.overrides)]
+                for point in sweep_points(self.sources(scenario), grids, seeds=self.seeds,
+                                          laps=self.laps, overrides=self.overrides)]
 
     def validate(self, recordings: RecordingSet | None = None) -> None:
         """Check every parameter's ends (or choices) against the scenario and recordings.
@@ -182,11 +184,7 @@ class SearchConfig:
                     recordings.for_spec(point.spec)
 
     def sampler_object(self, resumed: int = 0) -> optuna.samplers.BaseSampler:
-        """Return the Optuna sampler (seeded, so a search is repeatable).
-
-        ``resumed`` is the number of trials a resumed study holds: its sampler is seeded
-        by :func:`resumed_seed`, so it does not draw the first trials' values again.
-        """
+        """Return the Optuna sampler seeded by :func:`resumed_seed` (``resumed``: trials held)."""
         seed = resumed_seed(self.sampler_seed, resumed)
         if self.sampler in ("grid", "random"):
             # The grid's points are queued when the study is made (grid_trials): Optuna's

@@ -51,7 +51,7 @@ from scenarios.bench.triggers import PersonTriggers
 from scenarios.results.outputs import summarize
 from scenarios.spec.layout import lap_worlds
 from scenarios.spec.routes import fleet_vehicles
-from scenarios.spec.scenario import ScenarioSpec
+from scenarios.spec.scenario import LOADER_FIELDS, ScenarioSpec
 from worlds.spec import PersonSpec, WorldSpec
 
 __all__ = ["BODY_FIELDS", "CHECKPOINT_S", "WarmStart", "WarmStarts"]
@@ -64,7 +64,7 @@ of the bench's state, about what 0.1 s of simulation costs)."""
 BODY_FIELDS = ("name", "enabled", "radius", "height")
 """A person's fields that make its body: built once, the same in every warm sample."""
 
-_SCENARIO_LABELS = ("name", "source")
+_SCENARIO_LABELS = ("name", *LOADER_FIELDS)
 """Scenario fields that only label a run: a sample may rename itself."""
 
 
