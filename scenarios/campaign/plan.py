@@ -242,22 +242,30 @@ def plan_campaign(
     laps: int | None = None,
     overrides: Sequence[str] = (),
     worlds_dir: Path | None,
+    read_files: dict[tuple[str, ...], tuple] | None = None,
 ) -> list[CampaignRun]:
     """Return every run, scenario by scenario, then policy, sample and seed.
 
     Writes the varied world of each sample that changes world objects into
     ``worlds_dir`` (which only such campaigns need); every run's scenario is checked in
     full (every lap's layout and the protective fields), once per distinct layout.
+    ``read_files``, a dictionary the caller keeps, holds each scenario's and world's
+    tables as first read: a caller that plans again (a falsification, once per sample)
+    plans every time from the files as they were at the start.
     """
     base = _base_overrides(laps, overrides)
     by_key = {variation.key: variation for variation in variations}
     checked: dict[ScenarioSpec, str | None] = {}
     runs: list[CampaignRun] = []
+    read = {} if read_files is None else read_files
     for scenario in scenarios:
-        path, table = _scenario_table(scenario)
-        name = scenario_from_toml(table, file=str(path), overrides=base, check_layout=False)
-        world_file = world_path(name.world)
-        world_table = read_toml(world_file)
+        if (scenario, *base) not in read:
+            path, table = _scenario_table(scenario)
+            name = scenario_from_toml(table, file=str(path), overrides=base,
+                                      check_layout=False)
+            world_file = world_path(name.world)
+            read[(scenario, *base)] = (path, table, name, world_file, read_toml(world_file))
+        path, table, name, world_file, world_table = read[(scenario, *base)]
         # The world read once here is carried by every run's spec (to the workers too).
         worlds = {name.world: world_from_toml(world_table, file=str(world_file))}
         for policy in policies:

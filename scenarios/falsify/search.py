@@ -35,7 +35,7 @@ from __future__ import annotations
 import json
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -95,6 +95,9 @@ uniform(LOW, HIGH) or choice(V1, V2, ...), not normal()
     laps: int | None = None
     overrides: tuple[str, ...] = ()
     worlds_dir: Path | None = None
+    # The scenario's and world's tables as read for the first plan: every sample's plan
+    # uses them, whatever happens to the files during the search.
+    read_files: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         for variation in self.variations:
@@ -181,7 +184,8 @@ uniform(LOW, HIGH) or choice(V1, V2, ...), not normal()
     def base_spec(self) -> ScenarioSpec:
         """Return the scenario every sample varies: its policy, seed, laps and ``--set``."""
         [run] = plan_campaign([self.scenario], [self.policy], [self.seed], (), [{}],
-                              laps=self.laps, overrides=self.overrides, worlds_dir=None)
+                              laps=self.laps, overrides=self.overrides, worlds_dir=None,
+                              read_files=self.read_files)
         return run.spec
 
     def warm_lap(self) -> int | None:
@@ -220,7 +224,7 @@ uniform(LOW, HIGH) or choice(V1, V2, ...), not normal()
         ordered = {v.key: values[v.key] for v in self.variations}
         [run] = plan_campaign([self.scenario], [self.policy], [self.seed], self.variations,
                               [ordered], laps=self.laps, overrides=self.overrides,
-                              worlds_dir=self.worlds_dir)
+                              worlds_dir=self.worlds_dir, read_files=self.read_files)
         if run.spec is None:
             raise RejectedPoint(run.reason)
         return [run]

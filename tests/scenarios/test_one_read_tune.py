@@ -9,6 +9,9 @@ import pytest
 
 import scenarios.campaign.execute as execute
 from scenarios.campaign.plan import plan_campaign
+from scenarios.campaign.variations import parse_variations
+from scenarios.falsify.objectives import parse_objectives
+from scenarios.falsify.search import FalsifyConfig
 from scenarios.spec.layout import lap_worlds, with_loaded_world
 from scenarios.spec.load import load_scenario
 from scenarios.tuning.params import parse_params
@@ -64,6 +67,23 @@ def test_sweep_and_search_points_keep_the_files_as_read_at_the_start(tmp_path):
     [trial] = config.points({"mapper.gate": 0.15})  # no file left to read
     assert trial.spec.mapper.gate == 0.15
     assert lap_worlds(trial.spec) == original
+
+
+def test_falsification_samples_keep_the_files_as_read_at_the_start(tmp_path):
+    scenario = write_tiny(tmp_path)
+    original = lap_worlds(load_scenario(scenario))
+    config = FalsifyConfig(str(scenario), "conservative",
+                           parse_variations(["mapper.gate=uniform(0.05, 0.2)"]),
+                           parse_objectives([], []), budget=2, seed=0)
+    [first] = config.points({"mapper.gate": 0.1})  # the first plan reads the files
+    (tmp_path / "tiny_world.toml").write_text(MOVED_WORLD)
+    assert lap_worlds(load_scenario(scenario)) != original  # the file did change
+    (tmp_path / "tiny_world.toml").unlink()
+    scenario.unlink()
+    [later] = config.points({"mapper.gate": 0.15})  # no file left to read
+    assert later.spec.mapper.gate == 0.15
+    assert lap_worlds(later.spec) == lap_worlds(first.spec) == original
+    assert lap_worlds(config.base_spec()) == original
 
 
 def figures(metrics):
