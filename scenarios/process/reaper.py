@@ -52,8 +52,13 @@ def children(pid: int) -> set[int]:
 
     Examples
     --------
-    >>> children(os.getpid()) == set()
-    True
+    >>> import subprocess, sys
+    >>> child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    >>> child.pid in children(os.getpid()), os.getpid() in children(child.pid)
+    (True, False)
+    >>> child.kill(); _ = child.wait()
+    >>> child.pid in children(os.getpid())  # reaped: gone from the process table
+    False
     """
     found = set()
     for entry in os.listdir("/proc"):
@@ -68,8 +73,17 @@ def descendants(pid: int) -> set[int]:
 
     Examples
     --------
-    >>> descendants(os.getpid()) == set()
-    True
+    >>> import subprocess, sys
+    >>> script = ("import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', "
+    ...           "'import time; time.sleep(60)']); print(flush=True); time.sleep(60)")
+    >>> child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE)
+    >>> _ = child.stdout.readline()  # its own child has started
+    >>> grandchildren = descendants(child.pid)
+    >>> len(grandchildren), grandchildren < descendants(os.getpid())
+    (1, True)
+    >>> for pid in grandchildren | {child.pid}:
+    ...     os.kill(pid, 9)
+    >>> _ = child.wait(); child.stdout.close()
     """
     found, todo = set(), [pid]
     while todo:
